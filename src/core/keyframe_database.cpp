@@ -1,0 +1,190 @@
+#include "mild_lcd/keyframe_database.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild {
+namespace {
+
+struct Vote {
+  FeatureId feature;
+  KeyframeIndex keyframe;
+  double phi;
+};
+
+// A stored feature that meets the query feature in several tables is still one candidate.
+// Only votes (pairs within d0) need this, and they are few, so sorting beats a visited-mark
+// array over every stored feature.
+void removeDuplicateVotes(std::vector<Vote>& votes) {
+  if (votes.size() < 2) return;
+  std::sort(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature < b.feature; });
+  votes.erase(std::unique(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature == b.feature; }),
+              votes.end());
+}
+
+// Turns the votes of one query feature into per-keyframe similarity (the burstiness weighting of
+// SimilarityParams) and adds them up.
+class VoteAccumulator {
+ public:
+  VoteAccumulator(const SimilarityParams& params, KeyframeIndex keyframes, std::vector<double>& similarity)
+      : params_(params), n_(keyframes), similarity_(similarity), last_feature_(keyframes, 0) {}
+
+  void addFeatureVotes(const std::vector<Vote>& votes) {
+    if (votes.empty()) return;
+    ++feature_counter_;
+    double weight = 1.0;
+    if (params_.inter_image_burstiness) {
+      double mass = params_.burstiness_regularizer;
+      uint32_t keyframes_hit = 0;
+      for (const Vote& v : votes) {
+        mass += v.phi;
+        if (last_feature_[v.keyframe] != feature_counter_) {
+          last_feature_[v.keyframe] = feature_counter_;
+          ++keyframes_hit;
+        }
+      }
+      if (!(mass > 0.0)) return;
+      weight = std::log(static_cast<double>(n_) / keyframes_hit) / mass;
+    }
+    for (const Vote& v : votes) similarity_[v.keyframe] += weight * v.phi;
+  }
+
+ private:
+  const SimilarityParams& params_;
+  const KeyframeIndex n_;
+  std::vector<double>& similarity_;
+  std::vector<uint32_t> last_feature_;
+  uint32_t feature_counter_ = 0;
+};
+
+}  // namespace
+
+QueryStats& QueryStats::operator+=(const QueryStats& o) {
+  query_features += o.query_features;
+  buckets_probed += o.buckets_probed;
+  candidates_visited += o.candidates_visited;
+  early_rejections += o.early_rejections;
+  full_distances += o.full_distances;
+  votes += o.votes;
+  return *this;
+}
+
+KeyframeDatabase::KeyframeDatabase(const DatabaseParams& params)
+    : params_((params.validate(), params)), phi_(params.similarity), index_(params.index) {
+  keyframe_offsets_.push_back(0);
+}
+
+void KeyframeDatabase::clear() {
+  index_.clear();
+  heads_.clear();
+  tails_.clear();
+  feature_keyframe_.clear();
+  keyframe_offsets_.assign(1, 0);
+}
+
+KeyframeIndex KeyframeDatabase::insert(const cv::Mat& descriptors) { return insert(descriptorsFromMat(descriptors)); }
+
+KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
+  const uint64_t total = static_cast<uint64_t>(featureCount()) + descriptors.size();
+  if (total >= std::numeric_limits<FeatureId>::max() || size() + 1 >= kAllKeyframes) {
+    throw InvalidInput("keyframe database is full (2^32 features or keyframes)");
+  }
+  const KeyframeIndex k = static_cast<KeyframeIndex>(size());
+  const FeatureId first = static_cast<FeatureId>(featureCount());
+  for (const Descriptor& d : descriptors) {
+    heads_.push_back(d.words[0]);
+    tails_.push_back({d.words[1], d.words[2], d.words[3]});
+    feature_keyframe_.push_back(k);
+  }
+  index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
+  keyframe_offsets_.push_back(static_cast<FeatureId>(total));
+  return k;
+}
+
+Descriptor KeyframeDatabase::descriptor(FeatureId f) const {
+  Descriptor d;
+  d.words[0] = heads_[f];
+  for (int w = 1; w < kDescriptorWords; ++w) d.words[w] = tails_[f][w - 1];
+  return d;
+}
+
+DescriptorList KeyframeDatabase::descriptors(KeyframeIndex k) const {
+  DescriptorList out;
+  for (FeatureId f = keyframe_offsets_[k]; f < keyframe_offsets_[k + 1]; ++f) out.push_back(descriptor(f));
+  return out;
+}
+
+QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_limit, SearchMode mode) const {
+  return query(descriptorsFromMat(q), candidate_limit, mode);
+}
+
+QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candidate_limit, SearchMode mode) const {
+  const KeyframeIndex n = static_cast<KeyframeIndex>(std::min<size_t>(candidate_limit, size()));
+  QueryResult result;
+  result.similarity.assign(n, 0.0);
+  QueryStats& stats = result.stats;
+  stats.query_features = q.size();
+  if (n == 0 || q.empty()) return result;
+
+  const SimilarityParams& sp = params_.similarity;
+  const FeatureId id_limit = keyframe_offsets_[n];
+  const int d0 = sp.max_distance;
+  const int tp = sp.early_termination_threshold;
+  VoteAccumulator accumulator(sp, n, result.similarity);
+  std::vector<Vote> votes;
+
+  for (const Descriptor& f : q) {
+    votes.clear();
+    if (mode == SearchMode::kExact) {
+      for (FeatureId id = 0; id < id_limit; ++id) {
+        ++stats.full_distances;
+        const int d = hammingDistance(f, descriptor(id));
+        if (d <= d0) votes.push_back({id, feature_keyframe_[id], phi_(d)});
+      }
+    } else {
+      ProbeCounters counters;
+      index_.probe(f, id_limit, counters, [&](FeatureId id, int) {
+        const int partial = popcount64(f.words[0] ^ heads_[id]);
+        if (partial > tp) {
+          ++stats.early_rejections;
+          return;
+        }
+        ++stats.full_distances;
+        const Tail& tail = tails_[id];
+        const int d = partial + popcount64(f.words[1] ^ tail[0]) + popcount64(f.words[2] ^ tail[1]) +
+                      popcount64(f.words[3] ^ tail[2]);
+        if (d <= d0) votes.push_back({id, feature_keyframe_[id], phi_(d)});
+      });
+      removeDuplicateVotes(votes);
+      stats.buckets_probed += counters.buckets_probed;
+      stats.candidates_visited += counters.entries_visited;
+    }
+    stats.votes += votes.size();
+    accumulator.addFeatureVotes(votes);
+  }
+
+  if (sp.normalize_by_feature_counts) {
+    for (KeyframeIndex k = 0; k < n; ++k) {
+      const size_t nk = featureCount(k);
+      if (nk > 0) result.similarity[k] /= static_cast<double>(q.size()) * static_cast<double>(nk);
+    }
+  }
+  return result;
+}
+
+QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit,
+                                             SearchMode mode) {
+  QueryResult result = query(descriptors, candidate_limit, mode);
+  insert(descriptors);
+  return result;
+}
+
+size_t KeyframeDatabase::memoryBytes() const {
+  return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(Tail) +
+         feature_keyframe_.capacity() * sizeof(KeyframeIndex) + keyframe_offsets_.capacity() * sizeof(FeatureId);
+}
+
+}  // namespace mild

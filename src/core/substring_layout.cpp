@@ -1,0 +1,28 @@
+#include "mild_lcd/substring_layout.hpp"
+
+#include <string>
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild {
+
+SubstringLayout::SubstringLayout(int num_substrings) {
+  if (num_substrings < kMinSubstrings || num_substrings > kMaxSubstrings) {
+    throw InvalidInput("number of hash tables (substrings) must be in [" + std::to_string(kMinSubstrings) + ", " +
+                       std::to_string(kMaxSubstrings) + "], got " + std::to_string(num_substrings));
+  }
+  const int base = kDescriptorBits / num_substrings;
+  const int longer = kDescriptorBits % num_substrings;
+  int offset = 0;
+  for (int t = 0; t < num_substrings; ++t) {
+    const int len = base + (t < longer ? 1 : 0);
+    Descriptor m;
+    for (int b = offset; b < offset + len; ++b) m.flip(b);
+    offsets_.push_back(offset);
+    lengths_.push_back(len);
+    masks_.push_back(m);
+    offset += len;
+  }
+}
+
+}  // namespace mild

@@ -1,0 +1,306 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <map>
+#include <random>
+#include <set>
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/keyframe_database.hpp"
+#include "random_descriptors.hpp"
+
+namespace mild {
+namespace {
+
+using Candidate = std::function<bool(const Descriptor& query, FeatureId stored)>;
+
+// The similarity formula of SimilarityParams written out directly over an explicit candidate set.
+std::vector<double> referenceSimilarity(const KeyframeDatabase& db, const DescriptorList& query, KeyframeIndex n,
+                                        const Candidate& is_candidate) {
+  const SimilarityParams& p = db.params().similarity;
+  std::vector<double> sim(n, 0.0);
+  for (const Descriptor& f : query) {
+    std::vector<std::pair<KeyframeIndex, double>> votes;
+    for (KeyframeIndex k = 0; k < n; ++k) {
+      for (FeatureId id = db.firstFeature(k); id < db.firstFeature(k) + db.featureCount(k); ++id) {
+        const int d = hammingDistance(f, db.descriptor(id));
+        if (d <= p.max_distance && is_candidate(f, id)) votes.emplace_back(k, std::exp(-double(d) * d / p.sigma2));
+      }
+    }
+    if (votes.empty()) continue;
+    double mass = p.burstiness_regularizer;
+    std::set<KeyframeIndex> hit;
+    for (auto& [k, phi] : votes) {
+      mass += phi;
+      hit.insert(k);
+    }
+    const double w = p.inter_image_burstiness ? std::log(double(n) / hit.size()) / mass : 1.0;
+    for (auto& [k, phi] : votes) sim[k] += w * phi;
+  }
+  if (p.normalize_by_feature_counts) {
+    for (KeyframeIndex k = 0; k < n; ++k) {
+      if (db.featureCount(k) > 0) sim[k] /= double(query.size()) * db.featureCount(k);
+    }
+  }
+  return sim;
+}
+
+void expectNear(const std::vector<double>& actual, const std::vector<double>& expected) {
+  ASSERT_EQ(actual.size(), expected.size());
+  for (size_t k = 0; k < actual.size(); ++k) {
+    EXPECT_NEAR(actual[k], expected[k], 1e-9 * (1.0 + std::abs(expected[k]))) << "keyframe " << k;
+  }
+}
+
+// Keyframes that share noisy copies of a common pool of "landmarks", so that queries get votes at
+// every distance and from several keyframes.
+struct Scene {
+  DescriptorList landmarks;
+  std::vector<DescriptorList> keyframes;
+  DescriptorList query;
+};
+
+Scene makeScene(std::mt19937_64& rng, int keyframes = 12, int features = 60) {
+  Scene s;
+  s.landmarks = test::randomDescriptors(300, rng);
+  std::uniform_int_distribution<int> landmark(0, 299), noise(0, 70);
+  for (int k = 0; k < keyframes; ++k) {
+    DescriptorList kf;
+    for (int i = 0; i < features; ++i) kf.push_back(test::flipRandomBits(s.landmarks[landmark(rng)], noise(rng), rng));
+    s.keyframes.push_back(kf);
+  }
+  for (int i = 0; i < 80; ++i) s.query.push_back(test::flipRandomBits(s.landmarks[landmark(rng)], noise(rng), rng));
+  return s;
+}
+
+DatabaseParams paramsWith(int m, int r) {
+  DatabaseParams p;
+  p.index.num_tables = m;
+  p.index.radius = r;
+  p.index.cap_buckets = false;
+  return p;
+}
+
+// A stored feature is an MIH candidate when it sits in a bucket of some table that the query
+// probes: its substring is within r of the query's, and no earlier feature of its keyframe took
+// that bucket (intra-image rule).
+Candidate mihCandidates(const KeyframeDatabase& db) {
+  return [&db](const Descriptor& q, FeatureId id) {
+    const MihIndex& index = db.index();
+    const KeyframeIndex k = db.keyframeOf(id);
+    const Descriptor stored = db.descriptor(id);
+    for (int t = 0; t < index.layout().count(); ++t) {
+      if (!index.meetsInTable(q, stored, t)) continue;
+      bool bucket_taken = false;
+      for (FeatureId earlier = db.firstFeature(k); earlier < id; ++earlier) {
+        bucket_taken |= index.layout().key(db.descriptor(earlier), t) == index.layout().key(stored, t);
+      }
+      if (!bucket_taken) return true;
+    }
+    return false;
+  };
+}
+
+TEST(KeyframeDatabase, IndexSimilarityEqualsTheFormulaOverTheCandidateSet) {
+  for (auto [m, r] : std::vector<std::pair<int, int>>{{16, 0}, {8, 1}, {12, 2}, {32, 0}}) {
+    for (bool burstiness : {true, false}) {
+      std::mt19937_64 rng(100 + m + r);
+      DatabaseParams p = paramsWith(m, r);
+      p.similarity.inter_image_burstiness = burstiness;
+      p.similarity.normalize_by_feature_counts = !burstiness;
+      p.similarity.burstiness_regularizer = burstiness ? 0.3 : 0.0;
+      KeyframeDatabase db(p);
+      const Scene s = makeScene(rng);
+      for (const auto& kf : s.keyframes) db.insert(kf);
+      const QueryResult result = db.query(s.query);
+      ASSERT_GT(result.stats.votes, 0u);
+      SCOPED_TRACE("m=" + std::to_string(m) + " r=" + std::to_string(r));
+      expectNear(result.similarity, referenceSimilarity(db, s.query, db.size(), mihCandidates(db)));
+    }
+  }
+}
+
+TEST(KeyframeDatabase, ExactModeEqualsBruteForceOverAllFeatures) {
+  std::mt19937_64 rng(9);
+  KeyframeDatabase db(paramsWith(16, 0));
+  const Scene s = makeScene(rng);
+  for (const auto& kf : s.keyframes) db.insert(kf);
+  const QueryResult exact = db.query(s.query, kAllKeyframes, SearchMode::kExact);
+  expectNear(exact.similarity, referenceSimilarity(db, s.query, db.size(), [](const Descriptor&, FeatureId) { return true; }));
+  EXPECT_EQ(exact.stats.full_distances, s.query.size() * db.featureCount());
+  // The index approximates: it can only miss votes, and on this scene it does.
+  const QueryResult approx = db.query(s.query);
+  EXPECT_LT(approx.stats.votes, exact.stats.votes);
+}
+
+TEST(KeyframeDatabase, CandidateLimitExcludesLaterKeyframesEntirely) {
+  std::mt19937_64 rng(11);
+  KeyframeDatabase db(paramsWith(16, 0));
+  const Scene s = makeScene(rng);
+  for (const auto& kf : s.keyframes) db.insert(kf);
+  const QueryResult limited = db.query(s.query, 5);
+  ASSERT_EQ(limited.similarity.size(), 5u);
+  expectNear(limited.similarity, referenceSimilarity(db, s.query, 5, mihCandidates(db)));
+}
+
+TEST(KeyframeDatabase, RepeatedFeaturesInOneKeyframeDoNotOutvoteDistinctMatches) {
+  std::mt19937_64 rng(21);
+  DatabaseParams p;  // defaults: burstiness handling on, caps on
+  KeyframeDatabase db(p);
+  const Descriptor repeated = test::randomDescriptor(rng);
+  const DescriptorList shared = test::randomDescriptors(50, rng);
+  for (int k = 0; k < 6; ++k) db.insert(test::randomDescriptors(100, rng));  // unrelated keyframes
+  const KeyframeIndex bursty = db.insert(DescriptorList(200, repeated));
+  DescriptorList near_duplicates;
+  for (const auto& d : shared) near_duplicates.push_back(test::flipRandomBits(d, 4, rng));
+  near_duplicates.resize(200, test::randomDescriptor(rng));
+  const KeyframeIndex distinct = db.insert(near_duplicates);
+
+  DescriptorList query = shared;
+  query.push_back(test::flipRandomBits(repeated, 2, rng));
+  const QueryResult result = db.query(query);
+  EXPECT_GT(result.similarity[distinct], result.similarity[bursty]);
+  EXPECT_GT(result.similarity[bursty], 0.0);
+}
+
+TEST(KeyframeDatabase, FeatureSeenInEveryKeyframeContributesNothing) {
+  std::mt19937_64 rng(31);
+  KeyframeDatabase db(paramsWith(16, 0));
+  const Descriptor everywhere = test::randomDescriptor(rng);
+  for (int k = 0; k < 10; ++k) {
+    DescriptorList kf = test::randomDescriptors(30, rng);
+    kf.push_back(test::flipRandomBits(everywhere, 3, rng));
+    db.insert(kf);
+  }
+  const QueryResult result = db.query({everywhere});
+  EXPECT_EQ(result.stats.votes, 10u);
+  for (double s : result.similarity) EXPECT_EQ(s, 0.0);
+  // The same feature in only some keyframes does vote.
+  KeyframeDatabase sparse(paramsWith(16, 0));
+  sparse.insert({everywhere});
+  sparse.insert(test::randomDescriptors(30, rng));
+  EXPECT_GT(sparse.query({everywhere}).similarity[0], 0.0);
+}
+
+TEST(KeyframeDatabase, EarlyTerminationAtOrAboveD0IsBitIdentical) {
+  std::mt19937_64 rng(41);
+  const Scene s = makeScene(rng, 20, 80);
+  DatabaseParams p = paramsWith(16, 1);
+  // d0 = 32 so that a fair share of random candidates exceed it on the first 64 bits alone.
+  p.similarity.max_distance = 32;
+  p.similarity.early_termination_threshold = 32;
+  KeyframeDatabase at_d0(p);
+  p.similarity.early_termination_threshold = 64;
+  KeyframeDatabase reference(p);
+  p.similarity.early_termination_threshold = 20;
+  KeyframeDatabase aggressive(p);
+  for (const auto& kf : s.keyframes) {
+    at_d0.insert(kf);
+    reference.insert(kf);
+    aggressive.insert(kf);
+  }
+  const QueryResult r_ref = reference.query(s.query);
+  const QueryResult r_at = at_d0.query(s.query);
+  EXPECT_EQ(r_at.similarity, r_ref.similarity);  // exact equality, not approximate
+  EXPECT_GT(r_at.stats.early_rejections, 0u);
+  EXPECT_LT(r_at.stats.full_distances, r_ref.stats.full_distances);
+  EXPECT_EQ(r_ref.stats.early_rejections, 0u);
+
+  const QueryResult r_aggr = aggressive.query(s.query);
+  EXPECT_LT(r_aggr.stats.full_distances, r_at.stats.full_distances);
+  EXPECT_EQ(r_aggr.stats.candidates_visited, r_ref.stats.candidates_visited);
+  EXPECT_EQ(r_aggr.stats.full_distances + r_aggr.stats.early_rejections, r_aggr.stats.candidates_visited);
+}
+
+TEST(KeyframeDatabase, HoldsMoreThan65535KeyframesWithoutWrapAround) {
+  std::mt19937_64 rng(51);
+  DatabaseParams p;
+  p.index.cap_buckets = false;
+  KeyframeDatabase db(p);
+  const KeyframeIndex n = 70000;
+  std::vector<DescriptorList> probes;  // keep a few keyframes to query for
+  const std::set<KeyframeIndex> probe_at = {3, 65535, 65536, 66000, n - 1};
+  for (KeyframeIndex k = 0; k < n; ++k) {
+    DescriptorList kf = test::randomDescriptors(10, rng);
+    if (probe_at.count(k)) probes.push_back(kf);
+    ASSERT_EQ(db.insert(kf), k);
+  }
+  ASSERT_EQ(db.size(), n);
+  ASSERT_EQ(db.featureCount(), size_t{n} * 10);
+  size_t i = 0;
+  for (KeyframeIndex k : probe_at) {
+    const QueryResult r = db.query(probes[i++]);
+    ASSERT_EQ(r.similarity.size(), n);
+    const auto best = std::max_element(r.similarity.begin(), r.similarity.end()) - r.similarity.begin();
+    EXPECT_EQ(static_cast<KeyframeIndex>(best), k);
+    EXPECT_EQ(db.keyframeOf(db.firstFeature(k)), k);
+  }
+}
+
+TEST(KeyframeDatabase, RejectsMalformedDescriptorsAndStaysUnchanged) {
+  std::mt19937_64 rng(61);
+  KeyframeDatabase db;
+  db.insert(test::randomDescriptors(20, rng));
+  const size_t features = db.featureCount();
+  const size_t entries = db.index().entryCount();
+  const cv::Mat too_narrow(10, 31, CV_8UC1, cv::Scalar(1));
+  const cv::Mat too_wide(10, 64, CV_8UC1, cv::Scalar(1));
+  const cv::Mat floats(10, 32, CV_32FC1, cv::Scalar(1));
+  const cv::Mat two_channels(10, 32, CV_8UC2, cv::Scalar(1));
+  for (const cv::Mat* bad : {&too_narrow, &too_wide, &floats, &two_channels}) {
+    EXPECT_THROW(db.insert(*bad), InvalidInput);
+    EXPECT_THROW(db.query(*bad), InvalidInput);
+  }
+  try {
+    db.insert(too_narrow);
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("32"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(db.size(), 1u);
+  EXPECT_EQ(db.featureCount(), features);
+  EXPECT_EQ(db.index().entryCount(), entries);
+  EXPECT_THROW(descriptorsFromBytes(nullptr, 33), InvalidInput);
+  const std::vector<uint8_t> bytes(64, 0);
+  EXPECT_THROW(descriptorsFromBytes(bytes.data(), bytes.size(), 3), InvalidInput);
+  EXPECT_EQ(descriptorsFromBytes(bytes.data(), bytes.size(), 2).size(), 2u);
+}
+
+TEST(KeyframeDatabase, InsertAndQueryQueriesBeforeInserting) {
+  std::mt19937_64 rng(71);
+  KeyframeDatabase db(paramsWith(16, 0));
+  const DescriptorList a = test::randomDescriptors(50, rng);
+  EXPECT_TRUE(db.insertAndQuery(a).similarity.empty());
+  db.insert(test::randomDescriptors(50, rng));
+  const QueryResult r = db.insertAndQuery(a);
+  ASSERT_EQ(r.similarity.size(), 2u);
+  EXPECT_GT(r.similarity[0], r.similarity[1]);
+  EXPECT_EQ(db.size(), 3u);
+  EXPECT_EQ(db.descriptors(2), a);
+  // Round trip through OpenCV's layout.
+  EXPECT_EQ(descriptorsFromMat(descriptorsToMat(a)), a);
+}
+
+TEST(KeyframeDatabase, EmptyKeyframesAndEmptyQueriesAreFine) {
+  std::mt19937_64 rng(81);
+  KeyframeDatabase db;
+  EXPECT_EQ(db.insert(DescriptorList{}), 0u);
+  EXPECT_EQ(db.insert(cv::Mat()), 1u);
+  db.insert(test::randomDescriptors(10, rng));
+  const QueryResult r = db.query(DescriptorList{});
+  EXPECT_EQ(r.similarity, std::vector<double>(3, 0.0));
+}
+
+TEST(KeyframeDatabase, ClearEmptiesEverything) {
+  std::mt19937_64 rng(91);
+  KeyframeDatabase db;
+  db.insert(test::randomDescriptors(10, rng));
+  db.clear();
+  EXPECT_EQ(db.size(), 0u);
+  EXPECT_EQ(db.featureCount(), 0u);
+  EXPECT_EQ(db.index().entryCount(), 0u);
+  EXPECT_EQ(db.insert(test::randomDescriptors(10, rng)), 0u);
+}
+
+}  // namespace
+}  // namespace mild

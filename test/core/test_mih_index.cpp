@@ -1,0 +1,148 @@
+#include <gtest/gtest.h>
+
+#include <random>
+#include <set>
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/mih_index.hpp"
+#include "random_descriptors.hpp"
+
+namespace mild {
+namespace {
+
+MihParams uncapped(int m, int r) {
+  MihParams p;
+  p.num_tables = m;
+  p.radius = r;
+  p.cap_buckets = false;
+  return p;
+}
+
+std::set<FeatureId> visited(const MihIndex& index, const Descriptor& q, FeatureId limit = kAllKeyframes) {
+  std::set<FeatureId> ids;
+  ProbeCounters counters;
+  index.probe(q, limit, counters, [&](FeatureId id, int) { ids.insert(id); });
+  return ids;
+}
+
+// Pigeonhole: d differing bits spread over m substrings leave at least one substring with at most
+// r of them whenever d < m (r + 1), so the pair must meet in some table.
+TEST(MihIndex, FindsEveryFeatureWithinPigeonholeDistance) {
+  std::mt19937_64 rng(42);
+  const std::vector<std::pair<int, int>> settings = {{16, 0}, {8, 0}, {32, 0}, {15, 0}, {24, 0},
+                                                     {16, 1}, {10, 1}, {8, 2}, {12, 2}, {16, 3}};
+  for (auto [m, r] : settings) {
+    MihIndex index(uncapped(m, r));
+    const int guaranteed = m * (r + 1);
+    DescriptorList stored;
+    const Descriptor base = test::randomDescriptor(rng);
+    // Features at every distance from the query, plus unrelated ones; one keyframe each so that the
+    // intra-image rule cannot hide any of them.
+    for (int d = 0; d < guaranteed + 40 && d <= kDescriptorBits; ++d) stored.push_back(test::flipRandomBits(base, d, rng));
+    for (int i = 0; i < 200; ++i) stored.push_back(test::randomDescriptor(rng));
+    for (size_t i = 0; i < stored.size(); ++i) index.insertKeyframe(&stored[i], 1, static_cast<FeatureId>(i));
+
+    const std::set<FeatureId> found = visited(index, base);
+    for (size_t i = 0; i < stored.size(); ++i) {
+      const int d = hammingDistance(base, stored[i]);
+      bool meets = false;
+      for (int t = 0; t < m; ++t) meets |= index.meetsInTable(base, stored[i], t);
+      if (d < guaranteed) {
+        ASSERT_TRUE(meets) << "m=" << m << " r=" << r << " d=" << d;
+      }
+      // The probe finds exactly the features that meet in at least one table.
+      ASSERT_EQ(found.count(static_cast<FeatureId>(i)) == 1, meets) << "m=" << m << " r=" << r << " d=" << d;
+    }
+  }
+}
+
+TEST(MihIndex, ProbesEveryBucketWithinTheRadius) {
+  for (int r = 0; r <= 3; ++r) {
+    MihIndex index(uncapped(16, r));
+    ProbeCounters counters;
+    index.probe(Descriptor{}, kAllKeyframes, counters, [](FeatureId, int) {});
+    uint64_t per_table = 0;
+    uint64_t binomial = 1;
+    for (int k = 0; k <= r; ++k) {
+      per_table += binomial;
+      binomial = binomial * (16 - k) / (k + 1);
+    }
+    EXPECT_EQ(counters.buckets_probed, 16 * per_table) << "r=" << r;
+  }
+}
+
+TEST(MihIndex, KeepsOneEntryPerKeyframePerBucket) {
+  std::mt19937_64 rng(1);
+  MihIndex index(uncapped(16, 0));
+  const Descriptor d = test::randomDescriptor(rng);
+  const DescriptorList copies(200, d);
+  index.insertKeyframe(copies.data(), copies.size(), 0);
+  EXPECT_EQ(index.entryCount(), 16u);
+  EXPECT_EQ(visited(index, d), (std::set<FeatureId>{0}));
+  // A second keyframe with the same descriptor gets its own entries.
+  index.insertKeyframe(copies.data(), 1, 200);
+  EXPECT_EQ(index.entryCount(), 32u);
+  EXPECT_EQ(visited(index, d), (std::set<FeatureId>{0, 200}));
+}
+
+TEST(MihIndex, DiscardsBucketsOverTheirCapAndStopsGrowingThem) {
+  std::mt19937_64 rng(3);
+  MihParams p;
+  p.num_tables = 16;
+  p.min_bucket_cap = 5;
+  p.bucket_cap_factor = 1e-9;  // the floor decides
+  MihIndex index(p);
+  const Descriptor common = test::randomDescriptor(rng);
+  for (FeatureId k = 0; k < 5; ++k) index.insertKeyframe(&common, 1, k);
+  EXPECT_EQ(index.discardedBuckets(), 0u);
+  EXPECT_EQ(visited(index, common).size(), 5u);
+  index.insertKeyframe(&common, 1, 5);  // the sixth entry would exceed the cap of 5
+  EXPECT_EQ(index.discardedBuckets(), 16u);
+  EXPECT_EQ(index.entryCount(), 0u);
+  EXPECT_TRUE(visited(index, common).empty());
+  index.insertKeyframe(&common, 1, 6);
+  EXPECT_EQ(index.entryCount(), 0u);
+  EXPECT_EQ(index.discardedBuckets(), 16u);
+  // Other buckets are unaffected.
+  const Descriptor other = test::randomDescriptor(rng);
+  index.insertKeyframe(&other, 1, 7);
+  EXPECT_EQ(visited(index, other), (std::set<FeatureId>{7}));
+}
+
+TEST(MihIndex, DefaultCapFollowsThePaperFormula) {
+  // N_buckets = 50 * N_features / 2^16 with N_features = 1.31M gives 1000 entries.
+  MihParams p;
+  p.expected_features = 1310720;
+  MihIndex index(p);
+  Descriptor common;
+  for (FeatureId k = 0; k < 1000; ++k) index.insertKeyframe(&common, 1, k);
+  EXPECT_EQ(index.discardedBuckets(), 0u);
+  index.insertKeyframe(&common, 1, 1000);
+  EXPECT_EQ(index.discardedBuckets(), 16u);
+}
+
+TEST(MihIndex, IgnoresIdsAtOrBeyondTheLimit) {
+  std::mt19937_64 rng(5);
+  MihIndex index(uncapped(16, 0));
+  const Descriptor d = test::randomDescriptor(rng);
+  for (FeatureId k = 0; k < 10; ++k) index.insertKeyframe(&d, 1, k);
+  EXPECT_EQ(visited(index, d, 4), (std::set<FeatureId>{0, 1, 2, 3}));
+}
+
+TEST(MihIndex, RejectsInvalidParameters) {
+  MihParams p;
+  p.num_tables = 2;
+  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  p = MihParams{};
+  p.radius = 4;
+  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  p = MihParams{};
+  p.radius = -1;
+  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  p = MihParams{};
+  p.bucket_cap_factor = 0;
+  EXPECT_THROW(MihIndex{p}, InvalidInput);
+}
+
+}  // namespace
+}  // namespace mild
