@@ -22,7 +22,9 @@ namespace mild {
 struct SimilarityParams {
   int max_distance = 64;       // d0
   double sigma2 = 900.0;       // sigma^2 in phi
-  bool inter_image_burstiness = true;
+  // The two halves of inter-image burstiness handling; both on is the paper's phi'.
+  bool idf_weighting = true;       // the log(N / N_f) factor
+  bool vote_normalization = true;  // the division by the feature's vote mass
   // Added to the vote mass of every query feature, so that a lone weak match does not get the
   // weight of a perfect one. 0 gives the paper's formula exactly.
   double burstiness_regularizer = 0.0;

@@ -36,18 +36,21 @@ class VoteAccumulator {
     if (votes.empty()) return;
     ++feature_counter_;
     double weight = 1.0;
-    if (params_.inter_image_burstiness) {
-      double mass = params_.burstiness_regularizer;
+    if (params_.idf_weighting) {
       uint32_t keyframes_hit = 0;
       for (const Vote& v : votes) {
-        mass += v.phi;
         if (last_feature_[v.keyframe] != feature_counter_) {
           last_feature_[v.keyframe] = feature_counter_;
           ++keyframes_hit;
         }
       }
+      weight *= std::log(static_cast<double>(n_) / keyframes_hit);
+    }
+    if (params_.vote_normalization) {
+      double mass = params_.burstiness_regularizer;
+      for (const Vote& v : votes) mass += v.phi;
       if (!(mass > 0.0)) return;
-      weight = std::log(static_cast<double>(n_) / keyframes_hit) / mass;
+      weight /= mass;
     }
     for (const Vote& v : votes) similarity_[v.keyframe] += weight * v.phi;
   }

@@ -35,7 +35,7 @@ std::vector<double> referenceSimilarity(const KeyframeDatabase& db, const Descri
       mass += phi;
       hit.insert(k);
     }
-    const double w = p.inter_image_burstiness ? std::log(double(n) / hit.size()) / mass : 1.0;
+    const double w = (p.idf_weighting ? std::log(double(n) / hit.size()) : 1.0) / (p.vote_normalization ? mass : 1.0);
     for (auto& [k, phi] : votes) sim[k] += w * phi;
   }
   if (p.normalize_by_feature_counts) {
@@ -107,7 +107,8 @@ TEST(KeyframeDatabase, IndexSimilarityEqualsTheFormulaOverTheCandidateSet) {
     for (bool burstiness : {true, false}) {
       std::mt19937_64 rng(100 + m + r);
       DatabaseParams p = paramsWith(m, r);
-      p.similarity.inter_image_burstiness = burstiness;
+      p.similarity.idf_weighting = burstiness;
+      p.similarity.vote_normalization = burstiness;
       p.similarity.normalize_by_feature_counts = !burstiness;
       p.similarity.burstiness_regularizer = burstiness ? 0.3 : 0.0;
       KeyframeDatabase db(p);

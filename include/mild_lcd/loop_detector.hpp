@@ -1,0 +1,122 @@
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "mild_lcd/candidate_verifier.hpp"
+#include "mild_lcd/feature_extractor.hpp"
+#include "mild_lcd/keyframe_database.hpp"
+#include "mild_lcd/loop_filter.hpp"
+
+namespace mild {
+
+struct CandidateParams {
+  // Temporal exclusion: keyframes closer than this to the query (in keyframes, or in seconds when
+  // > 0) are never candidates, and take no part in the similarity (they would dominate it).
+  int exclusion_frames = 40;
+  double exclusion_seconds = 0.0;
+  // At most this many candidates per keyframe, each a local maximum of the loop probability over
+  // +- suppression_radius keyframes, with probability >= min_probability.
+  int max_candidates = 3;
+  int suppression_radius = 5;
+  double min_probability = 0.0;
+
+  void validate() const;
+};
+
+struct DetectorParams {
+  OrbParams orb;
+  DatabaseParams database;
+  FilterParams filter;
+  CandidateParams candidates;
+  SearchMode search = SearchMode::kIndex;
+
+  void validate() const;
+};
+
+struct LoopCandidate {
+  uint64_t id = 0;            // the candidate keyframe's id
+  KeyframeIndex index = 0;    // its position in the database
+  double stamp = 0.0;
+  double probability = 0.0;   // posterior loop probability from the filter
+  double similarity = 0.0;    // Phi' of the query against this keyframe
+  Verification verification;  // geometric check (verified=false, inliers=0 when verification is off)
+};
+
+struct StepStats {
+  double extract_ms = 0.0;
+  double query_ms = 0.0;
+  double filter_ms = 0.0;
+  double verify_ms = 0.0;
+  size_t features = 0;
+  size_t eligible_keyframes = 0;
+  QueryStats query;
+};
+
+struct DetectionResult {
+  uint64_t query_id = 0;
+  KeyframeIndex query_index = 0;
+  std::vector<LoopCandidate> candidates;  // best first
+  std::vector<double> similarity;         // Phi' against every eligible keyframe (by database index)
+  StepStats stats;
+};
+
+// A stored keyframe, as handed to verifiers and clients (e.g. the sparse-match service).
+struct KeyframeRecord {
+  uint64_t id = 0;
+  double stamp = 0.0;
+  std::vector<cv::KeyPoint> keypoints;
+};
+
+// The loop-closure pipeline: features -> MIH database (insert and query) -> Bayesian filter ->
+// ranked candidates -> optional geometric verification. Not thread-safe: callers serialise access.
+class LoopDetector {
+ public:
+  explicit LoopDetector(const DetectorParams& params = {});
+  ~LoopDetector();
+
+  const DetectorParams& params() const { return params_; }
+
+  // Installs the check run on every reported candidate (none by default).
+  void setVerifier(std::unique_ptr<CandidateVerifier> verifier) { verifier_ = std::move(verifier); }
+  bool verifies() const { return verifier_ != nullptr; }
+
+  // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image or
+  // an id already in the database. Without an id, the next free one (largest so far + 1) is used.
+  DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
+                          std::optional<uint64_t> id = std::nullopt);
+  // Same, for features computed elsewhere (e.g. by the SLAM front-end).
+  DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
+
+  size_t size() const { return records_.size(); }
+  const KeyframeDatabase& database() const { return database_; }
+  const LoopFilter& filter() const { return filter_; }
+  const KeyframeRecord& record(KeyframeIndex k) const { return records_[k]; }
+  std::optional<KeyframeIndex> find(uint64_t id) const;
+  Features features(KeyframeIndex k) const;
+  uint64_t nextId() const { return next_id_; }
+  size_t memoryBytes() const;
+
+  void reset();
+
+ private:
+  KeyframeIndex eligibleCount(double stamp) const;
+  std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief,
+                                              const std::vector<double>& similarity) const;
+
+  DetectorParams params_;
+  OrbExtractor extractor_;
+  KeyframeDatabase database_;
+  LoopFilter filter_;
+  std::unique_ptr<CandidateVerifier> verifier_;
+  std::vector<KeyframeRecord> records_;
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
+  uint64_t next_id_ = 0;
+};
+
+}  // namespace mild

@@ -1,0 +1,85 @@
+#pragma once
+
+#include <vector>
+
+namespace mild {
+
+// Bayesian filter over the similarity vector (seed paper III.A: "Bayesian inference employs
+// temporal coherency to get a final probability of loop closure based on image similarity").
+//
+// State. For every eligible database keyframe j, p_j = P(the current keyframe closes a loop with
+// j | all similarities so far), plus p_none = P(no loop). The hypotheses are exclusive (a keyframe
+// is at one place at most), so for each keyframe j this is a two-state loop / no-loop filter whose
+// "no loop with j" state is the mixture "loop with another keyframe, or no loop at all". That
+// coupling is what makes a place that matches several stored places (perceptual aliasing: one
+// facade material on many buildings) less probable than a place that matches one.
+//
+// Transition (temporal coherency). A robot that revisits a place keeps revisiting it, and the
+// stored keyframe it matches moves forward along the old trajectory, about one keyframe per new
+// keyframe. Belief at j therefore moves to j + d with weight motion_kernel[d] (normalised), it
+// persists with probability loop_persistence, and a loop starts from "no loop" with probability
+// loop_onset, spread evenly over the eligible keyframes:
+//   prior_j    = persistence * sum_d K(d) p_{j-d}  +  onset * p_none / n
+//   prior_none = (1 - persistence) * sum_j p_j     +  (1 - onset) * p_none
+//
+// Likelihood (saliency against the score distribution). The similarity vector s of the current
+// keyframe is standardised robustly against its own distribution,
+//   z_j = (s_j - median(s)) / (1.4826 * MAD(s)),
+//   L_j = max(1, z_j),   L_none = no_loop_likelihood.
+// Median and MAD, unlike mean and standard deviation, are not inflated by the matches themselves,
+// so a strong match stays salient in a small map (a sample z-score cannot exceed sqrt(n) over n
+// keyframes, which silenced loops in maps under ~100 keyframes). no_loop_likelihood is the
+// saliency that "no loop" explains: on the bench sequences, queries without a loop reach a
+// maximum robust z of 5-9 (median), loop queries 60-70.
+//
+// Update: posterior proportional to likelihood x prior, normalised over all hypotheses.
+//
+// Reported loop probability of keyframe j: the posterior mass within +-candidate_window keyframes
+// of j (neighbouring keyframes show the same place).
+//
+// Causal: the state after keyframe t depends only on similarities up to t; nothing published for a
+// keyframe is revised later (the original MILD code rewrote loop flags up to three frames late).
+struct FilterParams {
+  double loop_persistence = 0.95;
+  double loop_onset = 0.01;
+  std::vector<double> motion_kernel = {0.3, 1.0, 0.6};  // weights of advancing 0, 1, 2 keyframes
+  double no_loop_likelihood = 8.0;
+  int candidate_window = 3;
+
+  void validate() const;  // throws InvalidInput naming the first invalid field
+};
+
+// Robust standardisation used for the likelihood: (s - median) / (1.4826 MAD), falling back to the
+// mean absolute deviation from the median when more than half the values are equal, and to all
+// zeros when every value is equal.
+std::vector<double> robustSaliency(const std::vector<double>& similarity);
+
+class LoopFilter {
+ public:
+  explicit LoopFilter(const FilterParams& params = {});
+  const FilterParams& params() const { return params_; }
+
+  // Advances one keyframe. similarity[j] is the current keyframe's similarity to eligible keyframe
+  // j; the eligible set is a prefix of the database that may grow between calls (a shorter vector
+  // means the database was cut, and the state beyond it is dropped). Returns the loop probability
+  // of every eligible keyframe (posterior mass within +-candidate_window).
+  const std::vector<double>& update(const std::vector<double>& similarity);
+
+  const std::vector<double>& loopProbability() const { return windowed_; }
+  const std::vector<double>& posterior() const { return posterior_; }
+  double noLoopProbability() const { return no_loop_; }
+  void reset();
+  // For persistence: replaces the state (non-negative, summing with no_loop to 1 within 1e-6).
+  void setState(std::vector<double> posterior, double no_loop);
+
+ private:
+  FilterParams params_;
+  std::vector<double> kernel_;  // motion_kernel normalised to sum 1
+  std::vector<double> posterior_;
+  double no_loop_ = 1.0;
+  std::vector<double> prior_;
+  std::vector<double> windowed_;
+  std::vector<double> saliency_;
+};
+
+}  // namespace mild

@@ -1,0 +1,77 @@
+#include "mild_lcd/feature_extractor.hpp"
+
+#include <string>
+
+#include <opencv2/imgproc.hpp>
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild {
+namespace {
+
+int channelsOf(PixelFormat f) {
+  switch (f) {
+    case PixelFormat::kGray: return 1;
+    case PixelFormat::kBgr:
+    case PixelFormat::kRgb: return 3;
+    case PixelFormat::kBgra:
+    case PixelFormat::kRgba: return 4;
+  }
+  return 0;
+}
+
+}  // namespace
+
+void OrbParams::validate() const {
+  if (num_features < 1) throw InvalidInput("orb/num_features must be >= 1, got " + std::to_string(num_features));
+  if (!(scale_factor > 1.0) || scale_factor > 4.0) {
+    throw InvalidInput("orb/scale_factor must be in (1, 4], got " + std::to_string(scale_factor));
+  }
+  if (num_levels < 1 || num_levels > 32) {
+    throw InvalidInput("orb/num_levels must be in [1, 32], got " + std::to_string(num_levels));
+  }
+  if (fast_threshold < 1 || fast_threshold > 255) {
+    throw InvalidInput("orb/fast_threshold must be in [1, 255], got " + std::to_string(fast_threshold));
+  }
+  if (edge_threshold < 3 || edge_threshold > 255) {
+    throw InvalidInput("orb/edge_threshold must be in [3, 255], got " + std::to_string(edge_threshold));
+  }
+}
+
+cv::Mat toGray(const cv::Mat& image, PixelFormat format) {
+  if (image.empty()) throw InvalidInput("image is empty (0 x 0)");
+  if (image.depth() != CV_8U) {
+    throw InvalidInput("image must have 8 bits per channel, got " + cv::typeToString(image.type()));
+  }
+  if (image.channels() != channelsOf(format)) {
+    throw InvalidInput("image has " + std::to_string(image.channels()) + " channel(s) but its encoding needs " +
+                       std::to_string(channelsOf(format)));
+  }
+  cv::Mat gray;
+  switch (format) {
+    case PixelFormat::kGray: gray = image; break;
+    case PixelFormat::kBgr: cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY); break;
+    case PixelFormat::kRgb: cv::cvtColor(image, gray, cv::COLOR_RGB2GRAY); break;
+    case PixelFormat::kBgra: cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY); break;
+    case PixelFormat::kRgba: cv::cvtColor(image, gray, cv::COLOR_RGBA2GRAY); break;
+  }
+  return gray;
+}
+
+OrbExtractor::OrbExtractor(const OrbParams& params) : params_((params.validate(), params)) {
+  orb_ = cv::ORB::create(params_.num_features, static_cast<float>(params_.scale_factor), params_.num_levels,
+                         params_.edge_threshold, 0, 2, cv::ORB::HARRIS_SCORE, params_.edge_threshold,
+                         params_.fast_threshold);
+}
+
+Features OrbExtractor::extract(const cv::Mat& image, PixelFormat format) const {
+  const cv::Mat gray = toGray(image, format);
+  Features out;
+  cv::Mat descriptors;
+  orb_->detectAndCompute(gray, cv::noArray(), out.keypoints, descriptors);
+  out.descriptors = descriptorsFromMat(descriptors);
+  if (out.descriptors.size() != out.keypoints.size()) out.keypoints.clear(), out.descriptors.clear();
+  return out;
+}
+
+}  // namespace mild

@@ -1,0 +1,158 @@
+#include "mild_lcd/loop_detector.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <string>
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+}  // namespace
+
+void CandidateParams::validate() const {
+  if (exclusion_frames < 0) throw InvalidInput("detector/exclusion_frames must be >= 0, got " + std::to_string(exclusion_frames));
+  if (!(exclusion_seconds >= 0.0)) throw InvalidInput("detector/exclusion_seconds must be >= 0");
+  if (max_candidates < 1) throw InvalidInput("detector/max_candidates must be >= 1, got " + std::to_string(max_candidates));
+  if (suppression_radius < 0) throw InvalidInput("detector/suppression_radius must be >= 0");
+  if (!(min_probability >= 0.0 && min_probability <= 1.0)) {
+    throw InvalidInput("detector/min_probability must be in [0, 1], got " + std::to_string(min_probability));
+  }
+}
+
+void DetectorParams::validate() const {
+  orb.validate();
+  database.validate();
+  filter.validate();
+  candidates.validate();
+}
+
+LoopDetector::LoopDetector(const DetectorParams& params)
+    : params_((params.validate(), params)),
+      extractor_(params.orb),
+      database_(params.database),
+      filter_(params.filter) {}
+
+LoopDetector::~LoopDetector() = default;
+
+void LoopDetector::reset() {
+  database_.clear();
+  filter_.reset();
+  records_.clear();
+  index_of_id_.clear();
+  next_id_ = 0;
+}
+
+std::optional<KeyframeIndex> LoopDetector::find(uint64_t id) const {
+  auto it = index_of_id_.find(id);
+  if (it == index_of_id_.end()) return std::nullopt;
+  return it->second;
+}
+
+Features LoopDetector::features(KeyframeIndex k) const {
+  return Features{records_[k].keypoints, database_.descriptors(k)};
+}
+
+size_t LoopDetector::memoryBytes() const {
+  size_t bytes = database_.memoryBytes() + records_.capacity() * sizeof(KeyframeRecord);
+  for (const auto& r : records_) bytes += r.keypoints.capacity() * sizeof(cv::KeyPoint);
+  return bytes + index_of_id_.size() * (sizeof(uint64_t) + sizeof(KeyframeIndex) + 2 * sizeof(void*));
+}
+
+KeyframeIndex LoopDetector::eligibleCount(double stamp) const {
+  // The query will be keyframe n; keyframe j may be a candidate when n - j >= exclusion_frames.
+  const size_t n = records_.size();
+  const size_t frames = static_cast<size_t>(params_.candidates.exclusion_frames);
+  size_t limit = frames == 0 ? n : (n + 1 > frames ? n + 1 - frames : 0);
+  if (params_.candidates.exclusion_seconds > 0.0) {
+    // Keyframes are stored in arrival order; stamps are expected to grow, so the eligible set is a prefix.
+    const double newest_allowed = stamp - params_.candidates.exclusion_seconds;
+    const auto end = records_.begin() + static_cast<long>(limit);
+    limit = static_cast<size_t>(std::upper_bound(records_.begin(), end, newest_allowed,
+                                                 [](double s, const KeyframeRecord& r) { return s < r.stamp; }) -
+                                records_.begin());
+  }
+  return static_cast<KeyframeIndex>(limit);
+}
+
+DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp, std::optional<uint64_t> id) {
+  if (id && index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+  const auto start = Clock::now();
+  Features features = extractor_.extract(image, format);
+  const double extract_ms = msSince(start);
+  DetectionResult result = process(std::move(features), stamp, id);
+  result.stats.extract_ms = extract_ms;
+  return result;
+}
+
+DetectionResult LoopDetector::process(Features features, double stamp, std::optional<uint64_t> id) {
+  if (features.keypoints.size() != features.descriptors.size()) {
+    throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
+                       std::to_string(features.descriptors.size()) + " descriptors");
+  }
+  if (id && index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+  DetectionResult result;
+  result.query_id = id ? *id : next_id_;
+  result.stats.features = features.descriptors.size();
+
+  auto start = Clock::now();
+  const KeyframeIndex eligible = eligibleCount(stamp);
+  QueryResult query = database_.insertAndQuery(features.descriptors, eligible, params_.search);
+  result.stats.query_ms = msSince(start);
+  result.stats.query = query.stats;
+  result.stats.eligible_keyframes = eligible;
+
+  result.query_index = static_cast<KeyframeIndex>(records_.size());
+  records_.push_back(KeyframeRecord{result.query_id, stamp, std::move(features.keypoints)});
+  index_of_id_.emplace(result.query_id, result.query_index);
+  next_id_ = std::max(next_id_, result.query_id + 1);
+
+  start = Clock::now();
+  const std::vector<double>& belief = filter_.update(query.similarity);
+  result.candidates = selectCandidates(belief, query.similarity);
+  result.stats.filter_ms = msSince(start);
+
+  if (verifier_ && !result.candidates.empty()) {
+    start = Clock::now();
+    const Features query_features = this->features(result.query_index);
+    for (LoopCandidate& c : result.candidates) c.verification = verifier_->verify(query_features, this->features(c.index));
+    result.stats.verify_ms = msSince(start);
+  }
+  result.similarity = std::move(query.similarity);
+  return result;
+}
+
+std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<double>& belief,
+                                                          const std::vector<double>& similarity) const {
+  const CandidateParams& p = params_.candidates;
+  std::vector<KeyframeIndex> order(belief.size());
+  for (KeyframeIndex j = 0; j < order.size(); ++j) order[j] = j;
+  std::sort(order.begin(), order.end(), [&](KeyframeIndex a, KeyframeIndex b) {
+    return belief[a] != belief[b] ? belief[a] > belief[b] : similarity[a] > similarity[b];
+  });
+  std::vector<LoopCandidate> out;
+  for (KeyframeIndex j : order) {
+    if (out.size() >= static_cast<size_t>(p.max_candidates) || belief[j] < p.min_probability || belief[j] <= 0.0) break;
+    const bool suppressed = std::any_of(out.begin(), out.end(), [&](const LoopCandidate& c) {
+      return (c.index > j ? c.index - j : j - c.index) <= static_cast<KeyframeIndex>(p.suppression_radius);
+    });
+    if (suppressed) continue;
+    LoopCandidate c;
+    c.index = j;
+    c.id = records_[j].id;
+    c.stamp = records_[j].stamp;
+    c.probability = belief[j];
+    c.similarity = similarity[j];
+    out.push_back(c);
+  }
+  return out;
+}
+
+}  // namespace mild

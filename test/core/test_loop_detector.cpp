@@ -1,0 +1,201 @@
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <set>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/evaluation.hpp"
+#include "mild_lcd/loop_detector.hpp"
+
+namespace fs = std::filesystem;
+
+namespace mild {
+namespace {
+
+const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+
+std::vector<cv::Mat> fixtureFrames() {
+  std::vector<std::string> files;
+  for (const auto& e : fs::directory_iterator(kFixture + "/images")) files.push_back(e.path().string());
+  std::sort(files.begin(), files.end());
+  std::vector<cv::Mat> frames;
+  for (const auto& f : files) frames.push_back(cv::imread(f, cv::IMREAD_GRAYSCALE));
+  return frames;
+}
+
+DetectorParams fixtureParams() {
+  DetectorParams p;
+  p.candidates.exclusion_frames = 8;  // the bench's 40 frames at a stride of 5
+  return p;
+}
+
+// A SLAM back-end would act on candidates above a probability threshold; 0.05 is the one the
+// README recommends.
+constexpr double kDecision = 0.05;
+
+TEST(LoopDetector, FindsTheFixtureLoopWithoutFalsePositives) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  ASSERT_EQ(frames.size(), 60u);
+  const GroundTruth truth = loadGroundTruth(kFixture + "/gt_loops.txt");
+  LoopDetector detector(fixtureParams());
+  std::vector<ScoredPair> reported;
+  std::set<int> detected_queries;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const DetectionResult r = detector.process(frames[i], PixelFormat::kGray, 0.5 * i, i);
+    EXPECT_EQ(r.query_id, i);
+    for (const LoopCandidate& c : r.candidates) {
+      reported.push_back({static_cast<int>(i), static_cast<int>(c.id), c.probability});
+      if (c.probability < kDecision) continue;
+      const std::pair<int, int> pair(static_cast<int>(i), static_cast<int>(c.id));
+      EXPECT_TRUE(truth.right.count(pair) || truth.dont_care.count(pair))
+          << "false positive " << i << " -> " << c.id << " p=" << c.probability;
+      if (truth.right.count(pair)) detected_queries.insert(pair.first);
+    }
+  }
+  // 13 loop queries (47-59); the filter needs a few keyframes of evidence before it commits.
+  EXPECT_GE(detected_queries.size(), 6u);
+  const Metrics m = evaluate(truth, reported, 8);
+  EXPECT_GE(m.recall_at_100_precision, 0.6);
+}
+
+TEST(LoopDetector, GreyBgrAndRgbInputGiveTheSameResult) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  DetectorParams p = fixtureParams();
+  LoopDetector grey(p), bgr(p), rgb(p), bgra(p);
+  for (size_t i = 0; i < 20; ++i) {
+    cv::Mat colour, colour4;
+    cv::cvtColor(frames[i], colour, cv::COLOR_GRAY2BGR);
+    cv::cvtColor(frames[i], colour4, cv::COLOR_GRAY2BGRA);
+    const auto a = grey.process(frames[i], PixelFormat::kGray, i);
+    const auto b = bgr.process(colour, PixelFormat::kBgr, i);
+    const auto c = rgb.process(colour, PixelFormat::kRgb, i);
+    const auto d = bgra.process(colour4, PixelFormat::kBgra, i);
+    EXPECT_EQ(a.stats.features, b.stats.features);
+    EXPECT_EQ(a.similarity, b.similarity);
+    EXPECT_EQ(a.similarity, c.similarity);
+    EXPECT_EQ(a.similarity, d.similarity);
+  }
+}
+
+TEST(LoopDetector, RejectsUnusableImagesAndKeepsTheDatabase) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  LoopDetector detector(fixtureParams());
+  detector.process(frames[0], PixelFormat::kGray, 0.0);
+  const size_t features = detector.database().featureCount();
+  const cv::Mat empty;
+  const cv::Mat deep(240, 320, CV_16UC1, cv::Scalar(1000));
+  const cv::Mat floats(240, 320, CV_32FC1, cv::Scalar(0.5));
+  cv::Mat colour;
+  cv::cvtColor(frames[1], colour, cv::COLOR_GRAY2BGR);
+  EXPECT_THROW(detector.process(empty, PixelFormat::kGray, 1.0), InvalidInput);
+  EXPECT_THROW(detector.process(deep, PixelFormat::kGray, 1.0), InvalidInput);
+  EXPECT_THROW(detector.process(floats, PixelFormat::kGray, 1.0), InvalidInput);
+  EXPECT_THROW(detector.process(colour, PixelFormat::kGray, 1.0), InvalidInput);    // 3 channels called grey
+  EXPECT_THROW(detector.process(frames[1], PixelFormat::kRgb, 1.0), InvalidInput);  // 1 channel called RGB
+  EXPECT_EQ(detector.size(), 1u);
+  EXPECT_EQ(detector.database().featureCount(), features);
+  // Still working afterwards.
+  EXPECT_EQ(detector.process(frames[1], PixelFormat::kGray, 1.0).query_index, 1u);
+}
+
+TEST(LoopDetector, TinyAndFeaturelessImagesAreKeyframesWithoutFeatures) {
+  LoopDetector detector(fixtureParams());
+  const auto r = detector.process(cv::Mat(8, 8, CV_8UC1, cv::Scalar(7)), PixelFormat::kGray, 0.0);
+  EXPECT_EQ(r.stats.features, 0u);
+  EXPECT_EQ(detector.size(), 1u);
+  detector.process(cv::Mat(480, 640, CV_8UC1, cv::Scalar(0)), PixelFormat::kGray, 1.0);
+  EXPECT_EQ(detector.size(), 2u);
+}
+
+TEST(LoopDetector, KeepsGivenIdsAndAssignsTheNextFreeOne) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  LoopDetector detector(fixtureParams());
+  EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
+  EXPECT_EQ(detector.process(frames[1], PixelFormat::kGray, 1.0, 1000).query_id, 1000u);
+  EXPECT_EQ(detector.process(frames[2], PixelFormat::kGray, 2.0).query_id, 1001u);
+  EXPECT_THROW(detector.process(frames[3], PixelFormat::kGray, 3.0, 1000), InvalidInput);
+  EXPECT_EQ(detector.size(), 3u);
+  ASSERT_TRUE(detector.find(1000));
+  EXPECT_EQ(*detector.find(1000), 1u);
+  EXPECT_FALSE(detector.find(5));
+  EXPECT_EQ(detector.record(2).id, 1001u);
+}
+
+TEST(LoopDetector, ExcludesRecentKeyframesByCountAndByTime) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  DetectorParams p;
+  p.candidates.exclusion_frames = 5;
+  LoopDetector by_count(p);
+  p.candidates.exclusion_frames = 0;
+  p.candidates.exclusion_seconds = 2.0;
+  LoopDetector by_time(p);
+  for (size_t i = 0; i < 12; ++i) {
+    const auto a = by_count.process(frames[i], PixelFormat::kGray, 0.5 * i);
+    EXPECT_EQ(a.similarity.size(), i >= 5 ? i - 4 : 0u);  // keyframes 0 .. i-5
+    const auto b = by_time.process(frames[i], PixelFormat::kGray, 0.5 * i);
+    // Stamps 0.5 s apart: keyframes at least 2 s older are the first i-3.
+    EXPECT_EQ(b.similarity.size(), i >= 4 ? i - 3 : 0u);
+    for (const auto& c : a.candidates) EXPECT_LE(c.index + 5, i);
+  }
+}
+
+TEST(LoopDetector, RejectsFeaturesWhoseCountsDisagree) {
+  LoopDetector detector;
+  Features f;
+  f.keypoints.resize(3);
+  f.descriptors.resize(2);
+  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
+  EXPECT_EQ(detector.size(), 0u);
+}
+
+// The verification seam: whatever verifier is installed sees the query's and each candidate's
+// features and its verdict travels with the candidate.
+class CountingVerifier : public CandidateVerifier {
+ public:
+  mutable int calls = 0;
+  Verification verify(const Features& query, const Features& candidate) const override {
+    ++calls;
+    Verification v;
+    v.attempted = true;
+    v.matches = static_cast<int>(std::min(query.descriptors.size(), candidate.descriptors.size()));
+    v.inliers = 42;
+    v.verified = true;
+    return v;
+  }
+};
+
+TEST(LoopDetector, RunsTheInstalledVerifierOnEveryCandidate) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  LoopDetector detector(fixtureParams());
+  auto verifier = std::make_unique<CountingVerifier>();
+  const CountingVerifier* seen = verifier.get();
+  detector.setVerifier(std::move(verifier));
+  size_t candidates = 0;
+  for (size_t i = 0; i < 20; ++i) {
+    const auto r = detector.process(frames[i], PixelFormat::kGray, i);
+    for (const auto& c : r.candidates) {
+      EXPECT_TRUE(c.verification.verified);
+      EXPECT_EQ(c.verification.inliers, 42);
+      ++candidates;
+    }
+  }
+  EXPECT_GT(candidates, 0u);
+  EXPECT_EQ(static_cast<size_t>(seen->calls), candidates);
+}
+
+TEST(LoopDetector, ResetForgetsEverything) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  LoopDetector detector(fixtureParams());
+  for (size_t i = 0; i < 10; ++i) detector.process(frames[i], PixelFormat::kGray, i, 100 + i);
+  detector.reset();
+  EXPECT_EQ(detector.size(), 0u);
+  EXPECT_EQ(detector.database().size(), 0u);
+  EXPECT_FALSE(detector.find(100));
+  EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
+}
+
+}  // namespace
+}  // namespace mild

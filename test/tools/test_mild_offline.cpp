@@ -1,0 +1,157 @@
+// Runs the installed-style mild_offline binary the way a user would and checks its contract.
+#include <gtest/gtest.h>
+
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+const std::string kFixtureConfig = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5.yaml";
+
+struct ProcessResult {
+  int status = -1;
+  std::string output;  // stdout and stderr
+};
+
+ProcessResult mildOffline(const std::string& args) {
+  const std::string command = std::string(MILD_OFFLINE_BIN) + " " + args + " 2>&1";
+  ProcessResult run;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return run;
+  char buffer[4096];
+  while (fgets(buffer, sizeof(buffer), pipe)) run.output += buffer;
+  const int raw = pclose(pipe);
+  run.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  return run;
+}
+
+class MildOffline : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("mild_offline_test_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+std::string readFile(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
+  const ProcessResult run = mildOffline("--images " + kFixture + " --config " + kFixtureConfig + " --output " + path("c.csv") +
+                              " --gt " + kFixture + "/gt_loops.txt --min-gap 8 --stats " + path("s.json") + " --plots " +
+                              path("plots"));
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_NE(run.output.find("recall@100%P: "), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("average precision: "), std::string::npos);
+  EXPECT_NE(run.output.find("max F1: "), std::string::npos);
+
+  const std::string csv = readFile(path("c.csv"));
+  EXPECT_EQ(csv.rfind("query,candidate,score\n", 0), 0u);
+  EXPECT_GT(std::count(csv.begin(), csv.end(), '\n'), 20);
+
+  const auto stats = nlohmann::json::parse(readFile(path("s.json")));
+  for (const char* stage : {"extract_ms", "query_ms", "filter_ms"}) {
+    for (const char* key : {"mean", "median", "p95", "max"}) {
+      EXPECT_TRUE(stats[stage].contains(key)) << stage << "." << key;
+    }
+    EXPECT_GE(stats[stage]["max"].get<double>(), stats[stage]["median"].get<double>());
+  }
+  EXPECT_EQ(stats["keyframes"].get<int>(), 60);
+  EXPECT_GT(stats["features"].get<int>(), 1000);
+  EXPECT_GT(stats["memory_bytes"].get<int>(), 0);
+
+  for (const char* png : {"pr_curve.png", "loops_matrix.png"}) {
+    const fs::path p = dir_ / "plots" / png;
+    ASSERT_TRUE(fs::exists(p)) << p;
+    EXPECT_EQ(readFile(p.string()).substr(1, 3), "PNG");
+  }
+}
+
+TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {
+  // Frames 0..11 of the fixture directly in a folder, frame 5 replaced by garbage.
+  for (int i = 0; i < 12; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.jpg", i);
+    if (i == 5) {
+      std::ofstream(path(name)) << "not a jpeg";
+    } else {
+      fs::copy_file(kFixture + "/images/" + name, path(name));
+    }
+  }
+  std::ofstream(path("notes.txt")) << "ignored";
+  const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv") +
+                              " --config " + kFixtureConfig);
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_NE(run.output.find("frame 5"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("000005.jpg"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("processed 11 of 12 frames"), std::string::npos) << run.output;
+  // Numbering stays aligned with the file list: the last frame is still query 11, none is 5.
+  const std::string csv = readFile(path("c.csv"));
+  EXPECT_NE(csv.find("\n11,"), std::string::npos) << csv;
+  EXPECT_EQ(csv.find("\n5,"), std::string::npos) << csv;
+}
+
+TEST_F(MildOffline, EmptyFolderIsAClearError) {
+  const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv"));
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find(dir_.string()), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("no image files"), std::string::npos) << run.output;
+}
+
+TEST_F(MildOffline, FolderWithoutImagesIsAClearError) {
+  std::ofstream(path("a.txt")) << "x";
+  std::ofstream(path("b.csv")) << "y";
+  const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv"));
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find("no image files"), std::string::npos) << run.output;
+}
+
+TEST_F(MildOffline, AllFramesUnreadableIsAClearError) {
+  std::ofstream(path("000000.jpg")) << "garbage";
+  std::ofstream(path("000001.png")) << "garbage";
+  const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv"));
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find("none of the 2 image files could be read"), std::string::npos) << run.output;
+}
+
+TEST_F(MildOffline, MalformedGroundTruthFailsBeforeProcessing) {
+  std::ofstream(path("gt.txt")) << "12 3 0.5 1\n12 three 0.5 1\n";
+  const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --gt " + path("gt.txt"));
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find(path("gt.txt") + ":2"), std::string::npos) << run.output;
+  EXPECT_EQ(run.output.find("processed"), std::string::npos) << "should fail before the run";
+}
+
+TEST_F(MildOffline, BadConfigNamesTheParameter) {
+  std::ofstream(path("bad.yaml")) << "filter:\n  no_loop_likelyhood: 3\n";
+  const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + path("bad.yaml"));
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find("filter/no_loop_likelyhood"), std::string::npos) << run.output;
+}
+
+TEST_F(MildOffline, MissingRequiredOptionsPrintUsage) {
+  const ProcessResult run = mildOffline("--images " + kFixture);
+  EXPECT_NE(run.status, 0);
+  EXPECT_NE(run.output.find("--output"), std::string::npos) << run.output;
+}
+
+}  // namespace
