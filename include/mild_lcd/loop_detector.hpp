@@ -10,6 +10,7 @@
 
 #include "mild_lcd/candidate_verifier.hpp"
 #include "mild_lcd/feature_extractor.hpp"
+#include "mild_lcd/geometric_verifier.hpp"
 #include "mild_lcd/keyframe_database.hpp"
 #include "mild_lcd/loop_filter.hpp"
 
@@ -34,6 +35,7 @@ struct DetectorParams {
   DatabaseParams database;
   FilterParams filter;
   CandidateParams candidates;
+  VerificationParams verification;
   SearchMode search = SearchMode::kIndex;
 
   void validate() const;
@@ -82,7 +84,8 @@ class LoopDetector {
 
   const DetectorParams& params() const { return params_; }
 
-  // Installs the check run on every reported candidate (none by default).
+  // Replaces the check run on every reported candidate (a GeometricVerifier when
+  // verification.enabled, none otherwise).
   void setVerifier(std::unique_ptr<CandidateVerifier> verifier) { verifier_ = std::move(verifier); }
   bool verifies() const { return verifier_ != nullptr; }
 

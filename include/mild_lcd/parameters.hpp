@@ -106,6 +106,21 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
   visit("detector/max_candidates", p.candidates.max_candidates);
   visit("detector/suppression_radius", p.candidates.suppression_radius);
   visit("detector/min_probability", p.candidates.min_probability);
+
+  visit("verification/enabled", p.verification.enabled);
+  visit("verification/num_tables", p.verification.matching.num_tables);
+  visit("verification/radius", p.verification.matching.radius);
+  visit("verification/max_distance", p.verification.matching.max_distance);
+  visit("verification/ratio", p.verification.matching.ratio);
+  visit("verification/cross_check", p.verification.matching.cross_check);
+  visit("verification/ransac_threshold", p.verification.ransac_threshold);
+  visit("verification/confidence", p.verification.confidence);
+  visit("verification/max_iterations", p.verification.max_iterations);
+  visit("verification/min_inliers", p.verification.min_inliers);
+  visit("verification/fx", p.verification.fx);
+  visit("verification/fy", p.verification.fy);
+  visit("verification/cx", p.verification.cx);
+  visit("verification/cy", p.verification.cy);
 }
 
 }  // namespace mild

@@ -33,7 +33,7 @@ struct SimilarityParams {
   bool normalize_by_feature_counts = false;
   // Early termination (seed paper III.E): a candidate whose distance on the first 64 bits exceeds
   // this is rejected without reading the other 192 bits. Values >= max_distance never change a score.
-  int early_termination_threshold = 64;
+  int early_termination_threshold = 20;
 
   // Throws InvalidInput naming the first invalid field.
   void validate() const;

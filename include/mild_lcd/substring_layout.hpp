@@ -25,22 +25,27 @@ class SubstringLayout {
 
   // The value of substring t of d (bits offset(t) .. offset(t)+length(t)-1, least significant first).
   uint64_t key(const Descriptor& d, int t) const {
-    const int off = offsets_[t];
-    const int len = lengths_[t];
-    const int word = off >> 6;
-    const int shift = off & 63;
-    uint64_t v = d.words[word] >> shift;
-    if (shift + len > 64) v |= d.words[word + 1] << (64 - shift);
-    return len == 64 ? v : (v & ((uint64_t{1} << len) - 1));
+    const Extract& e = extract_[t];
+    uint64_t v = d.words[e.word] >> e.shift;
+    if (e.spans) v |= d.words[e.word + 1] << (64 - e.shift);
+    return v & e.mask;
   }
 
   // The descriptor bits that substring t covers, as a 256-bit mask.
   const Descriptor& mask(int t) const { return masks_[t]; }
 
  private:
+  // Precomputed bit extraction per substring: key() is on every hot path.
+  struct Extract {
+    int word = 0;
+    int shift = 0;
+    bool spans = false;  // continues into the next word
+    uint64_t mask = 0;
+  };
   std::vector<int> offsets_;
   std::vector<int> lengths_;
   std::vector<Descriptor> masks_;
+  std::vector<Extract> extract_;
 };
 
 }  // namespace mild

@@ -32,13 +32,16 @@ void DetectorParams::validate() const {
   database.validate();
   filter.validate();
   candidates.validate();
+  if (verification.enabled) verification.validate();
 }
 
 LoopDetector::LoopDetector(const DetectorParams& params)
     : params_((params.validate(), params)),
       extractor_(params.orb),
       database_(params.database),
-      filter_(params.filter) {}
+      filter_(params.filter) {
+  if (params_.verification.enabled) verifier_ = std::make_unique<GeometricVerifier>(params_.verification);
+}
 
 LoopDetector::~LoopDetector() = default;
 

@@ -21,6 +21,12 @@ SubstringLayout::SubstringLayout(int num_substrings) {
     offsets_.push_back(offset);
     lengths_.push_back(len);
     masks_.push_back(m);
+    Extract e;
+    e.word = offset >> 6;
+    e.shift = offset & 63;
+    e.spans = e.shift + len > 64;
+    e.mask = len == 64 ? ~uint64_t{0} : (uint64_t{1} << len) - 1;
+    extract_.push_back(e);
     offset += len;
   }
 }

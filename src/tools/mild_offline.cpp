@@ -35,6 +35,7 @@ struct Options {
   std::string plots;
   std::string stats;
   std::string similarity;
+  std::string details;
   double fps = 10.0;
   int min_gap = 40;
   bool print_config = false;
@@ -73,6 +74,12 @@ int run(const Options& opt) {
   std::ofstream csv(opt.output);
   if (!csv) throw mild::InvalidInput(opt.output + ": cannot write the candidates file");
   csv << "query,candidate,score\n";
+  std::ofstream details;
+  if (!opt.details.empty()) {
+    details.open(opt.details);
+    if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
+    details << "query,candidate,probability,similarity,matches,inliers,inlier_ratio,verified\n";
+  }
 
   mild::LoopDetector detector(params);
   const size_t n = seq.frames.size();
@@ -96,7 +103,15 @@ int run(const Options& opt) {
     verify_ms.push_back(r.stats.verify_ms);
     features += r.stats.features;
     for (const mild::LoopCandidate& c : r.candidates) {
-      csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
+      // With verification on, the evaluation scores verified candidates only.
+      if (!detector.verifies() || c.verification.verified) {
+        csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
+      }
+      if (details.is_open()) {
+        const mild::Verification& v = c.verification;
+        details << i << "," << c.id << "," << mild::formatScore(c.probability) << "," << c.similarity << "," << v.matches
+                << "," << v.inliers << "," << v.inlier_ratio << "," << (v.verified ? 1 : 0) << "\n";
+      }
     }
     if (!similarity_matrix.empty()) {
       // Row = query frame, column = candidate frame (ids are frame indices).
@@ -165,6 +180,8 @@ int main(int argc, char** argv) {
   app.add_option("--gt", opt.gt, "ground-truth gt_loops.txt: print recall@100%P, average precision, max F1");
   app.add_option("--plots", opt.plots, "folder for pr_curve.png and loops_matrix.png (needs --gt)");
   app.add_option("--stats", opt.stats, "JSON file for per-stage timing and database size");
+  app.add_option("--details", opt.details,
+                 "CSV of every candidate with probability, similarity, matches, inliers and the verdict");
   app.add_option("--similarity", opt.similarity, "write the raw similarity matrix (frames x frames, float32 .npy)");
   app.add_option("--fps", opt.fps, "frame rate for time stamps when the sequence has no times.txt")->check(CLI::PositiveNumber);
   app.add_option("--min-gap", opt.min_gap, "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
