@@ -1,0 +1,54 @@
+#pragma once
+
+// Conversions between mild_lcd's ROS messages and the ROS-free core. Every function that takes a
+// message validates it and throws mild::InvalidInput with a message fit for a log line or a service
+// reply; none of them touches the detector.
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Image.h>
+#include <std_msgs/Header.h>
+
+#include "mild_lcd/KeyPoint.h"
+#include "mild_lcd/Keyframe.h"
+#include "mild_lcd/LoopClosure.h"
+#include "mild_lcd/SparseMatch.h"
+#include "mild_lcd/geometric_verifier.hpp"
+#include "mild_lcd/loop_detector.hpp"
+
+namespace mild_lcd {
+
+// An image ready for the core: 8 bits per channel and its channel order.
+struct DecodedImage {
+  cv::Mat image;
+  mild::PixelFormat format = mild::PixelFormat::kGray;
+};
+
+// mono8, bgr8, rgb8, bgra8 and rgba8 are used as they are (no copy); mono16 is scaled to mono8.
+// Anything else, an empty image or a buffer too small for its declared size is rejected.
+DecodedImage imageFromMsg(const sensor_msgs::Image& msg);
+// JPEG or PNG bytes of the `compressed` transport.
+DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg);
+
+std::vector<cv::KeyPoint> keypointsFromMsg(const std::vector<mild_lcd::KeyPoint>& msg);
+std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& keypoints);
+
+// Keypoints and descriptors of a Keyframe message (32 bytes of descriptor per keypoint).
+mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
+
+// The answer published for one processed keyframe.
+mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
+                                       size_t database_size, const std::function<double(uint64_t)>& stamp_of);
+
+// Serves a SparseMatch request. `stored` returns the features of a keyframe in the database (none
+// for an unknown id). Failures come back as success = false with a message, never as exceptions.
+using StoredFeatures = std::function<std::optional<mild::Features>(uint64_t id)>;
+mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request& request, const StoredFeatures& stored,
+                                            const mild::GeometricVerifier& verifier);
+
+}  // namespace mild_lcd

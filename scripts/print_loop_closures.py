@@ -1,0 +1,85 @@
+#!/usr/bin/python3
+"""Prints mild_lcd's loop closures as they arrive and, given ground truth, scores them at the end.
+
+ROS node. Subscribes to `loop_closure` (mild_lcd/LoopClosure). Private parameters:
+  ~min_probability  print closures whose best candidate reaches this probability (default 0.5)
+  ~verified_only    score and print verified candidates only (default true, as mild_offline)
+  ~frames           exit after this many LoopClosure messages, printing the score (0: run until killed)
+  ~gt               gt_loops.txt whose frame indices are the keyframe ids (default: none)
+  ~min_gap          EVALUATION.md's minimum gap (default 40)
+  ~output_csv       also write the scored rows query,candidate,score to this file
+  ~idle_timeout     with ~frames set, give up this many seconds after the last message (default 30)
+"""
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import rospy
+from mild_lcd.msg import LoopClosure
+
+
+class Printer:
+    def __init__(self):
+        self.min_probability = rospy.get_param("~min_probability", 0.5)
+        self.verified_only = rospy.get_param("~verified_only", True)
+        self.frames = int(rospy.get_param("~frames", 0))
+        self.gt = rospy.get_param("~gt", "")
+        self.min_gap = int(rospy.get_param("~min_gap", 40))
+        self.output_csv = rospy.get_param("~output_csv", "")
+        self.idle_timeout = float(rospy.get_param("~idle_timeout", 30.0))
+        self.rows = []
+        self.received = 0
+        self.closures = 0
+        self.last = time.monotonic()
+        rospy.Subscriber("loop_closure", LoopClosure, self.on_loop_closure, queue_size=1000)
+
+    def on_loop_closure(self, msg):
+        self.received += 1
+        self.last = time.monotonic()
+        kept = [c for c in msg.candidates if c.verified or not self.verified_only]
+        for c in kept:
+            self.rows.append((msg.query_id, c.id, c.probability))
+        if kept and kept[0].probability >= self.min_probability:
+            self.closures += 1
+            c = kept[0]
+            print(f"loop closure: keyframe {msg.query_id} -> {c.id}  probability {c.probability:.3f}  "
+                  f"inliers {c.inliers}{' verified' if c.verified else ''}", flush=True)
+
+    def done(self):
+        if self.frames <= 0:
+            return False
+        return self.received >= self.frames or time.monotonic() - self.last > self.idle_timeout
+
+    def report(self):
+        print(f"processed {self.received} keyframes, {self.closures} loop closures at probability >= "
+              f"{self.min_probability}", flush=True)
+        path = self.output_csv or os.path.join(tempfile.mkdtemp(prefix="mild_lcd_"), "candidates.csv")
+        with open(path, "w") as f:
+            f.write("query,candidate,score\n")
+            for q, c, p in self.rows:
+                f.write(f"{q},{c},{p:.10g}\n")
+        if self.gt:
+            score = subprocess.run(["rosrun", "mild_lcd", "mild_score", self.gt, path, "--min-gap", str(self.min_gap)],
+                                   capture_output=True, text=True)
+            print("score against " + self.gt + ":\n" + (score.stdout or score.stderr).rstrip(), flush=True)
+
+
+def main():
+    rospy.init_node("loop_closure_printer")
+    printer = Printer()
+    rate = rospy.Rate(10) if not rospy.get_param("/use_sim_time", False) else None
+    while not rospy.is_shutdown() and not printer.done():
+        if rate:
+            rate.sleep()
+        else:
+            time.sleep(0.1)  # sim time may stand still once the bag ends
+    printer.report()
+    if printer.frames > 0 and printer.received < printer.frames:
+        print(f"only {printer.received} of {printer.frames} keyframes were answered", file=sys.stderr, flush=True)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()

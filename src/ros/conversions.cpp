@@ -1,0 +1,214 @@
+#include "mild_lcd/ros/conversions.hpp"
+
+#include <cmath>
+#include <string>
+
+#include <opencv2/imgcodecs.hpp>
+#include <sensor_msgs/image_encodings.h>
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild_lcd {
+namespace enc = sensor_msgs::image_encodings;
+
+namespace {
+
+struct Layout {
+  const char* encoding;
+  int type;
+  mild::PixelFormat format;
+};
+
+// Encodings handed to the core without conversion.
+constexpr Layout kDirect[] = {
+    {"mono8", CV_8UC1, mild::PixelFormat::kGray}, {"8UC1", CV_8UC1, mild::PixelFormat::kGray},
+    {"bgr8", CV_8UC3, mild::PixelFormat::kBgr},   {"rgb8", CV_8UC3, mild::PixelFormat::kRgb},
+    {"bgra8", CV_8UC4, mild::PixelFormat::kBgra}, {"rgba8", CV_8UC4, mild::PixelFormat::kRgba},
+};
+
+// Wraps the message buffer after checking that it really holds height rows of step bytes.
+cv::Mat wrap(const sensor_msgs::Image& msg, int type) {
+  const size_t row_bytes = static_cast<size_t>(msg.width) * CV_ELEM_SIZE(type);
+  if (msg.step < row_bytes) {
+    throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is smaller than a row of " +
+                             std::to_string(msg.width) + " pixels (" + std::to_string(row_bytes) + " bytes)");
+  }
+  if (msg.data.size() < static_cast<size_t>(msg.step) * msg.height) {
+    throw mild::InvalidInput("image data holds " + std::to_string(msg.data.size()) + " bytes but " +
+                             std::to_string(msg.height) + " rows of " + std::to_string(msg.step) + " are declared");
+  }
+  if (msg.width > 1u << 15 || msg.height > 1u << 15) throw mild::InvalidInput("image larger than 32768 pixels a side");
+  return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type, const_cast<uint8_t*>(msg.data.data()),
+                 msg.step);
+}
+
+}  // namespace
+
+DecodedImage imageFromMsg(const sensor_msgs::Image& msg) {
+  if (msg.width == 0 || msg.height == 0) {
+    throw mild::InvalidInput("empty image (" + std::to_string(msg.width) + " x " + std::to_string(msg.height) + ")");
+  }
+  for (const Layout& l : kDirect) {
+    if (msg.encoding == l.encoding) return DecodedImage{wrap(msg, l.type), l.format};
+  }
+  if (msg.encoding == enc::MONO16 || msg.encoding == enc::TYPE_16UC1) {
+    if (msg.is_bigendian) throw mild::InvalidInput("big-endian mono16 images are not supported");
+    DecodedImage out;
+    wrap(msg, CV_16UC1).convertTo(out.image, CV_8UC1, 1.0 / 256.0);
+    return out;
+  }
+  throw mild::InvalidInput("unsupported image encoding '" + msg.encoding +
+                           "' (accepted: mono8, mono16, bgr8, rgb8, bgra8, rgba8)");
+}
+
+DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg) {
+  if (msg.data.empty()) throw mild::InvalidInput("empty compressed image");
+  cv::Mat decoded;
+  try {
+    decoded = cv::imdecode(msg.data, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception&) {
+    decoded.release();
+  }
+  if (decoded.empty()) throw mild::InvalidInput("compressed image (format '" + msg.format + "') cannot be decoded");
+  if (decoded.depth() == CV_16U) decoded.convertTo(decoded, CV_8U, 1.0 / 256.0);
+  switch (decoded.channels()) {
+    case 1: return DecodedImage{decoded, mild::PixelFormat::kGray};
+    case 3: return DecodedImage{decoded, mild::PixelFormat::kBgr};  // imdecode yields BGR
+    case 4: return DecodedImage{decoded, mild::PixelFormat::kBgra};
+    default: throw mild::InvalidInput("compressed image has " + std::to_string(decoded.channels()) + " channels");
+  }
+}
+
+std::vector<cv::KeyPoint> keypointsFromMsg(const std::vector<mild_lcd::KeyPoint>& msg) {
+  std::vector<cv::KeyPoint> out;
+  out.reserve(msg.size());
+  for (const auto& k : msg) {
+    if (!std::isfinite(k.x) || !std::isfinite(k.y)) throw mild::InvalidInput("keypoint with a non-finite position");
+    out.emplace_back(k.x, k.y, k.size, k.angle, k.response, k.octave);
+  }
+  return out;
+}
+
+std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& keypoints) {
+  std::vector<mild_lcd::KeyPoint> out(keypoints.size());
+  for (size_t i = 0; i < keypoints.size(); ++i) {
+    out[i].x = keypoints[i].pt.x;
+    out[i].y = keypoints[i].pt.y;
+    out[i].size = keypoints[i].size;
+    out[i].angle = keypoints[i].angle;
+    out[i].response = keypoints[i].response;
+    out[i].octave = keypoints[i].octave;
+  }
+  return out;
+}
+
+mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
+  mild::Features f;
+  f.descriptors = mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
+                                             static_cast<long>(msg.keypoints.size()));
+  f.keypoints = keypointsFromMsg(msg.keypoints);
+  return f;
+}
+
+mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
+                                       size_t database_size, const std::function<double(uint64_t)>& stamp_of) {
+  mild_lcd::LoopClosure msg;
+  msg.header = header;
+  msg.query_id = result.query_id;
+  msg.features = static_cast<int32_t>(result.stats.features);
+  msg.database_size = static_cast<int32_t>(database_size);
+  msg.extract_ms = result.stats.extract_ms;
+  msg.query_ms = result.stats.query_ms;
+  msg.filter_ms = result.stats.filter_ms;
+  msg.verify_ms = result.stats.verify_ms;
+  for (const mild::LoopCandidate& c : result.candidates) {
+    mild_lcd::LoopCandidate m;
+    m.id = c.id;
+    m.stamp = ros::Time(std::max(0.0, stamp_of(c.id)));
+    m.probability = c.probability;
+    m.similarity = c.similarity;
+    m.verified = c.verification.verified;
+    m.inliers = c.verification.inliers;
+    m.matches = c.verification.matches;
+    m.inlier_ratio = c.verification.inlier_ratio;
+    msg.candidates.push_back(m);
+  }
+  return msg;
+}
+
+namespace {
+
+mild::Features requestSide(const std::vector<uint8_t>& descriptors, const std::vector<mild_lcd::KeyPoint>& keypoints,
+                           const char* side) {
+  if (descriptors.empty()) throw mild::InvalidInput(std::string(side) + "_descriptors is empty");
+  mild::Features f;
+  try {
+    f.descriptors = mild::descriptorsFromBytes(descriptors.data(), descriptors.size(),
+                                               keypoints.empty() ? -1 : static_cast<long>(keypoints.size()));
+  } catch (const mild::InvalidInput& e) {
+    throw mild::InvalidInput(std::string(side) + ": " + e.what());
+  }
+  f.keypoints = keypointsFromMsg(keypoints);
+  return f;
+}
+
+}  // namespace
+
+mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request& request, const StoredFeatures& stored,
+                                            const mild::GeometricVerifier& verifier) {
+  mild_lcd::SparseMatch::Response response;
+  try {
+    mild::Features query, train;
+    if (request.use_descriptors) {
+      query = requestSide(request.query_descriptors, request.query_keypoints, "query");
+      train = requestSide(request.train_descriptors, request.train_keypoints, "train");
+    } else {
+      if (!request.query_descriptors.empty() || !request.train_descriptors.empty()) {
+        throw mild::InvalidInput("descriptors were given but use_descriptors is false: set it to match them, "
+                                 "or leave them empty to match stored keyframes by id");
+      }
+      auto q = stored(request.query_id);
+      if (!q) throw mild::InvalidInput("unknown query_id " + std::to_string(request.query_id));
+      auto t = stored(request.train_id);
+      if (!t) throw mild::InvalidInput("unknown train_id " + std::to_string(request.train_id));
+      query = std::move(*q);
+      train = std::move(*t);
+    }
+    const bool with_geometry = !query.keypoints.empty() && !train.keypoints.empty();
+    mild::GeometricCheck check;
+    if (with_geometry) {
+      check = verifier.check(query, train);
+    } else {
+      mild::SparseMatcher matcher(verifier.params().matching);
+      check.matches = matcher.match(query.descriptors, train.descriptors);
+    }
+    for (const auto& m : check.matches) {
+      mild_lcd::FeatureMatch fm;
+      fm.query = m.query;
+      fm.train = m.train;
+      fm.distance = m.distance;
+      response.matches.push_back(fm);
+    }
+    response.model_fitted = !check.model.empty();
+    response.inlier_mask = check.inlier_mask;
+    response.inliers = check.verification.inliers;
+    response.verified = check.verification.verified;
+    if (response.model_fitted) {
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) response.model.push_back(check.model.at<double>(r, c));
+      }
+    }
+    response.success = true;
+    response.message = std::to_string(response.matches.size()) + " matches" +
+                       (with_geometry ? ", " + std::to_string(response.inliers) + " inliers" +
+                                            (response.verified ? " (verified)" : " (not verified)")
+                                      : " (no keypoints: no geometric check)");
+  } catch (const mild::InvalidInput& e) {
+    response = mild_lcd::SparseMatch::Response();
+    response.success = false;
+    response.message = e.what();
+  }
+  return response;
+}
+
+}  // namespace mild_lcd

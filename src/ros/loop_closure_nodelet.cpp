@@ -1,0 +1,332 @@
+// mild_lcd/LoopClosureNodelet: keyframe images or features in, loop closures with probabilities
+// out. It converts messages and calls mild::LoopDetector; the algorithm lives in the core.
+
+#include <algorithm>
+#include <atomic>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <image_transport/image_transport.h>
+#include <nodelet/nodelet.h>
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
+#include <std_srvs/Trigger.h>
+
+#include "mild_lcd/bounded_queue.hpp"
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/ros_parameter_source.hpp"
+
+namespace mild_lcd {
+
+// Settings of the ROS wrapper itself (the detector's are under orb/, index/, ... as in
+// config/default.yaml).
+struct NodeletSettings {
+  bool use_image_input = true;
+  bool use_keyframe_input = true;
+  int queue_size = 100;
+  int debug_image_cache = 1000;
+
+  static NodeletSettings load(const ros::NodeHandle& pnh) {
+    NodeletSettings s;
+    pnh.param("use_image_input", s.use_image_input, s.use_image_input);
+    pnh.param("use_keyframe_input", s.use_keyframe_input, s.use_keyframe_input);
+    pnh.param("queue_size", s.queue_size, s.queue_size);
+    pnh.param("debug_image_cache", s.debug_image_cache, s.debug_image_cache);
+    if (!s.use_image_input && !s.use_keyframe_input) {
+      throw mild::InvalidInput("use_image_input and use_keyframe_input are both false: nothing to listen to");
+    }
+    if (s.queue_size < 1) throw mild::InvalidInput("queue_size must be >= 1, got " + std::to_string(s.queue_size));
+    if (s.debug_image_cache < 0) throw mild::InvalidInput("debug_image_cache must be >= 0");
+    return s;
+  }
+};
+
+class LoopClosureNodelet : public nodelet::Nodelet {
+ public:
+  ~LoopClosureNodelet() override {
+    if (queue_) queue_->close();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  // One keyframe as it arrived; exactly one pointer is set.
+  struct Input {
+    sensor_msgs::ImageConstPtr image;
+    sensor_msgs::CompressedImageConstPtr compressed;
+    mild_lcd::KeyframeConstPtr keyframe;
+  };
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    try {
+      settings_ = NodeletSettings::load(pnh);
+      detector_ = std::make_unique<mild::LoopDetector>(mild::loadDetectorParams(RosParameterSource(pnh)));
+    } catch (const mild::InvalidInput& e) {
+      NODELET_FATAL("invalid parameter: %s", e.what());
+      throw;  // the loader reports the failure; nothing half-configured keeps running
+    }
+    const mild::DetectorParams& params = detector_->params();
+    match_verifier_ = std::make_unique<mild::GeometricVerifier>(serviceVerificationParams(params.verification));
+
+    queue_ = std::make_unique<mild::BoundedQueue<Input>>(static_cast<size_t>(settings_.queue_size));
+    worker_ = std::thread([this] { workerLoop(); });
+
+    loop_pub_ = nh.advertise<mild_lcd::LoopClosure>("loop_closure", 100);
+    image_transport::ImageTransport it(nh);
+    debug_pub_ = it.advertise("debug_image", 1);
+
+    if (settings_.use_image_input) subscribeImages(nh, pnh);
+    if (settings_.use_keyframe_input) {
+      keyframe_sub_ = nh.subscribe<mild_lcd::Keyframe>("keyframe", settings_.queue_size,
+                                                       [this](const mild_lcd::KeyframeConstPtr& m) { enqueue({nullptr, nullptr, m}); });
+    }
+    match_srv_ = nh.advertiseService("sparse_match", &LoopClosureNodelet::sparseMatchService, this);
+    reset_srv_ = nh.advertiseService("reset", &LoopClosureNodelet::resetService, this);
+
+    updater_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    updater_->setHardwareID("mild_lcd");
+    updater_->add("loop closure detector", this, &LoopClosureNodelet::diagnose);
+    diagnostics_timer_ = nh.createWallTimer(ros::WallDuration(0.5), [this](const ros::WallTimerEvent&) { updater_->update(); });
+
+    NODELET_INFO("mild_lcd ready: %s%s%s, %d hash tables, exclusion %d keyframes, verification %s",
+                 settings_.use_image_input ? "image" : "", settings_.use_image_input && settings_.use_keyframe_input ? " and " : "",
+                 settings_.use_keyframe_input ? "keyframe input" : "", params.database.index.num_tables,
+                 params.candidates.exclusion_frames, params.verification.enabled ? "on" : "off");
+  }
+
+  // The sparse_match service verifies whatever it is asked, even when loop verification is off.
+  static mild::VerificationParams serviceVerificationParams(mild::VerificationParams p) {
+    p.enabled = true;
+    return p;
+  }
+
+  // image_transport's `compressed` plugin is not packaged for Debian's ROS; without it the
+  // compressed topic is subscribed and decoded here, so `~image_transport: compressed` works either way.
+  void subscribeImages(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
+    image_transport::ImageTransport it(nh);
+    std::string transport;
+    pnh.param<std::string>("image_transport", transport, "raw");
+    const auto loadable = it.getLoadableTransports();
+    const bool plugin = std::find(loadable.begin(), loadable.end(), "image_transport/" + transport) != loadable.end();
+    if (transport == "compressed" && !plugin) {
+      const std::string topic = nh.resolveName("image") + "/compressed";
+      compressed_sub_ = nh.subscribe<sensor_msgs::CompressedImage>(
+          topic, settings_.queue_size, [this](const sensor_msgs::CompressedImageConstPtr& m) { enqueue({nullptr, m, nullptr}); });
+      NODELET_INFO("subscribed to %s (compressed images, decoded by mild_lcd)", topic.c_str());
+      return;
+    }
+    image_sub_ = it.subscribe("image", settings_.queue_size, [this](const sensor_msgs::ImageConstPtr& m) { enqueue({m, nullptr, nullptr}); },
+                              ros::VoidPtr(), image_transport::TransportHints(transport, ros::TransportHints(), pnh));
+    NODELET_INFO("subscribed to %s (transport %s)", image_sub_.getTopic().c_str(), transport.c_str());
+  }
+
+  // Callbacks only queue: the nodelet manager's threads are never held up by detection.
+  void enqueue(Input item) {
+    if (!queue_->push(std::move(item))) {
+      NODELET_WARN_THROTTLE(2.0, "input queue full (queue_size %d): dropped the oldest keyframe, %zu dropped so far",
+                            settings_.queue_size, queue_->dropped());
+    }
+  }
+
+  void workerLoop() {
+    while (auto item = queue_->pop()) {
+      process(*item);
+      queue_->done();
+    }
+  }
+
+  void process(const Input& input) {
+    std_msgs::Header header;
+    mild::DetectionResult result;
+    cv::Mat query_image;
+    try {
+      std::lock_guard<std::mutex> lock(detector_mutex_);
+      if (input.image || input.compressed) {
+        header = input.image ? input.image->header : input.compressed->header;
+        const DecodedImage decoded = input.image ? imageFromMsg(*input.image) : imageFromMsg(*input.compressed);
+        result = detector_->process(decoded.image, decoded.format, header.stamp.toSec());
+        query_image = decoded.image;
+      } else {
+        const auto& keyframe = input.keyframe;
+        header = keyframe->header;
+        std::optional<uint64_t> id;
+        if (keyframe->has_id) id = keyframe->id;
+        result = detector_->process(featuresFromMsg(*keyframe), header.stamp.toSec(), id);
+      }
+      const auto stamp_of = [this](uint64_t id) {
+        auto k = detector_->find(id);
+        return k ? detector_->record(*k).stamp : 0.0;
+      };
+      loop_pub_.publish(loopClosureToMsg(result, header, detector_->size(), stamp_of));
+      rememberForDebug(result.query_id, query_image);
+      if (debug_pub_.getNumSubscribers() > 0) publishDebugImage(result, header);
+    } catch (const mild::InvalidInput& e) {
+      ++rejected_;
+      NODELET_WARN_THROTTLE(2.0, "rejected keyframe (stamp %.3f): %s (%zu rejected so far)", header.stamp.toSec(), e.what(),
+                            rejected_.load());
+      return;
+    } catch (const std::exception& e) {
+      ++rejected_;
+      NODELET_ERROR_THROTTLE(2.0, "keyframe (stamp %.3f) failed: %s", header.stamp.toSec(), e.what());
+      return;
+    }
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++processed_;
+    last_ms_ = result.stats.extract_ms + result.stats.query_ms + result.stats.filter_ms + result.stats.verify_ms;
+    total_ms_ += last_ms_;
+    last_query_ms_ = result.stats.query_ms;
+    total_query_ms_ += last_query_ms_;
+  }
+
+  // Half-resolution grey copies of the latest keyframes, for drawing a candidate next to its query.
+  void rememberForDebug(uint64_t id, const cv::Mat& image) {
+    if (settings_.debug_image_cache == 0 || image.empty()) return;
+    cv::Mat small;
+    cv::resize(mild::toGray(image, image.channels() == 1 ? mild::PixelFormat::kGray
+                                    : image.channels() == 3 ? mild::PixelFormat::kBgr : mild::PixelFormat::kBgra),
+               small, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+    debug_cache_[id] = small;
+    debug_order_.push_back(id);
+    while (debug_order_.size() > static_cast<size_t>(settings_.debug_image_cache)) {
+      debug_cache_.erase(debug_order_.front());
+      debug_order_.pop_front();
+    }
+  }
+
+  // Query (left) and best candidate (right) with the inlier matches; called with the detector locked.
+  void publishDebugImage(const mild::DetectionResult& result, const std_msgs::Header& header) {
+    auto left = debug_cache_.find(result.query_id);
+    if (left == debug_cache_.end()) return;
+    cv::Mat canvas;
+    const cv::Mat& query = left->second;
+    if (result.candidates.empty() || !debug_cache_.count(result.candidates.front().id)) {
+      cv::cvtColor(query, canvas, cv::COLOR_GRAY2BGR);
+      cv::putText(canvas, "no candidate", cv::Point(5, 15), cv::FONT_HERSHEY_PLAIN, 1.0, cv::Scalar(0, 0, 255));
+    } else {
+      const mild::LoopCandidate& best = result.candidates.front();
+      const mild::GeometricCheck check =
+          match_verifier_->check(detector_->features(result.query_index), detector_->features(best.index));
+      auto half = [](std::vector<cv::KeyPoint> k) {
+        for (auto& p : k) p.pt *= 0.5f;
+        return k;
+      };
+      std::vector<cv::DMatch> inliers;
+      for (size_t i = 0; i < check.matches.size(); ++i) {
+        if (!check.inlier_mask.empty() && check.inlier_mask[i]) {
+          inliers.emplace_back(check.matches[i].query, check.matches[i].train, static_cast<float>(check.matches[i].distance));
+        }
+      }
+      cv::drawMatches(query, half(detector_->record(result.query_index).keypoints), debug_cache_[best.id],
+                      half(detector_->record(best.index).keypoints), inliers, canvas, cv::Scalar(0, 255, 0),
+                      cv::Scalar(120, 120, 120));
+      const std::string label = "id " + std::to_string(result.query_id) + " -> " + std::to_string(best.id) +
+                                "  p=" + std::to_string(best.probability).substr(0, 5) + "  inliers " +
+                                std::to_string(check.verification.inliers);
+      cv::putText(canvas, label, cv::Point(5, 15), cv::FONT_HERSHEY_PLAIN, 1.0,
+                  best.verification.verified ? cv::Scalar(0, 200, 0) : cv::Scalar(0, 0, 255));
+    }
+    debug_pub_.publish(cv_bridge::CvImage(header, sensor_msgs::image_encodings::BGR8, canvas).toImageMsg());
+  }
+
+  bool sparseMatchService(mild_lcd::SparseMatch::Request& request, mild_lcd::SparseMatch::Response& response) {
+    std::lock_guard<std::mutex> lock(detector_mutex_);
+    const auto stored = [this](uint64_t id) -> std::optional<mild::Features> {
+      auto k = detector_->find(id);
+      if (!k) return std::nullopt;
+      return detector_->features(*k);
+    };
+    response = sparseMatch(request, stored, *match_verifier_);
+    if (!response.success) NODELET_WARN_THROTTLE(2.0, "sparse_match: %s", response.message.c_str());
+    return true;  // failures are reported in the response, not as a failed call
+  }
+
+  bool resetService(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
+    const size_t pending = queue_->clear();
+    std::lock_guard<std::mutex> lock(detector_mutex_);
+    const size_t keyframes = detector_->size();
+    detector_->reset();
+    debug_cache_.clear();
+    debug_order_.clear();
+    response.success = true;
+    response.message = "cleared " + std::to_string(keyframes) + " keyframes and " + std::to_string(pending) +
+                       " waiting in the queue";
+    NODELET_INFO("reset: %s", response.message.c_str());
+    return true;
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+    size_t keyframes = 0, features = 0, memory = 0, discarded = 0;
+    {
+      std::unique_lock<std::mutex> lock(detector_mutex_, std::try_to_lock);
+      if (lock.owns_lock()) {  // never wait for a keyframe in progress; report what is cached
+        cached_keyframes_ = detector_->size();
+        cached_features_ = detector_->database().featureCount();
+        cached_memory_ = detector_->memoryBytes();
+        cached_discarded_ = detector_->database().index().discardedBuckets();
+      }
+      keyframes = cached_keyframes_, features = cached_features_, memory = cached_memory_, discarded = cached_discarded_;
+    }
+    const size_t dropped = queue_->dropped(), rejected = rejected_.load(), depth = queue_->size();
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    if (dropped > reported_dropped_ || rejected > reported_rejected_) {
+      status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu dropped, %zu rejected keyframes since start", dropped,
+                      rejected);
+    } else {
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "running");
+    }
+    reported_dropped_ = dropped;
+    reported_rejected_ = rejected;
+    status.add("database keyframes", keyframes);
+    status.add("database features", features);
+    status.add("memory (MB)", static_cast<double>(memory) / 1e6);
+    status.add("discarded buckets", discarded);
+    status.add("processed keyframes", processed_);
+    status.add("queue depth", depth);
+    status.add("queue capacity", queue_->capacity());
+    status.add("dropped keyframes", dropped);
+    status.add("rejected keyframes", rejected);
+    status.add("last query (ms)", last_query_ms_);
+    status.add("mean query (ms)", processed_ ? total_query_ms_ / static_cast<double>(processed_) : 0.0);
+    status.add("last keyframe (ms)", last_ms_);
+    status.add("mean keyframe (ms)", processed_ ? total_ms_ / static_cast<double>(processed_) : 0.0);
+  }
+
+  NodeletSettings settings_;
+  std::unique_ptr<mild::LoopDetector> detector_;
+  std::unique_ptr<mild::GeometricVerifier> match_verifier_;
+  std::mutex detector_mutex_;  // detector_, match_verifier_, debug cache
+  std::unique_ptr<mild::BoundedQueue<Input>> queue_;
+  std::thread worker_;
+
+  std::unordered_map<uint64_t, cv::Mat> debug_cache_;
+  std::deque<uint64_t> debug_order_;
+
+  image_transport::Subscriber image_sub_;
+  ros::Subscriber compressed_sub_, keyframe_sub_;
+  ros::Publisher loop_pub_;
+  image_transport::Publisher debug_pub_;
+  ros::ServiceServer match_srv_, reset_srv_;
+  std::unique_ptr<diagnostic_updater::Updater> updater_;
+  ros::WallTimer diagnostics_timer_;
+
+  std::atomic<size_t> rejected_{0};
+  std::mutex stats_mutex_;
+  size_t processed_ = 0, reported_dropped_ = 0, reported_rejected_ = 0;
+  double last_ms_ = 0.0, total_ms_ = 0.0, last_query_ms_ = 0.0, total_query_ms_ = 0.0;
+  size_t cached_keyframes_ = 0, cached_features_ = 0, cached_memory_ = 0, cached_discarded_ = 0;
+};
+
+}  // namespace mild_lcd
+
+PLUGINLIB_EXPORT_CLASS(mild_lcd::LoopClosureNodelet, nodelet::Nodelet)

@@ -1,0 +1,46 @@
+// mild_score: scores a candidates CSV (query,candidate,score) against ground truth with the rules of
+// ../shared/bench/EVALUATION.md, as mild_offline --gt does.
+
+#include <cstdio>
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/evaluation.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"Score loop-closure candidates against ground truth (recall@100%P, AP, max F1)."};
+  std::string gt, candidates;
+  int min_gap = 40;
+  bool json = false;
+  app.add_option("gt", gt, "gt_loops.txt")->required();
+  app.add_option("candidates", candidates, "CSV rows query,candidate,score")->required();
+  app.add_option("--min-gap", min_gap, "pairs closer than this many frames are ignored")->check(CLI::NonNegativeNumber);
+  app.add_flag("--json", json, "print one JSON object");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    const mild::Metrics m = mild::evaluate(mild::loadGroundTruth(gt), mild::loadCandidates(candidates), min_gap);
+    if (json) {
+      std::cout << nlohmann::json{{"loop_queries", m.loop_queries},
+                                  {"scored_queries", m.scored_queries},
+                                  {"true_positives", m.true_positives},
+                                  {"false_positives", m.false_positives},
+                                  {"recall_at_100_precision", m.recall_at_100_precision},
+                                  {"average_precision", m.average_precision},
+                                  {"max_f1", m.max_f1}}
+                       .dump()
+                << "\n";
+    } else {
+      std::printf("recall@100%%P: %.4f\naverage precision: %.4f\nmax F1: %.4f\n", m.recall_at_100_precision,
+                  m.average_precision, m.max_f1);
+      std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
+                  m.scored_queries, m.true_positives, m.false_positives);
+    }
+  } catch (const mild::InvalidInput& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 2;
+  }
+  return 0;
+}
