@@ -1,19 +1,52 @@
 #!/bin/bash
-# Installs missing Debian packages, builds mild_lcd in build/, and runs loop-closure detection on
-# the embedded sample (sample/corridor: 300 frames of a ring corridor with one revisit), printing
-# the loop closures it finds and the score against the sample's ground truth.
+# The demo: installs missing Debian packages, builds mild_lcd in .build/, starts a private roscore
+# (its own port, ROS_HOME inside .build/), replays the embedded sample as a rosbag (300 frames of a
+# ring corridor with one revisit) through the nodelet, prints the loop closures as they arrive and
+# the score against the sample's ground truth, and stops everything it started. Then it runs the
+# offline runner over the same frames for the precision-recall plots.
+#   RATE=1 ./scripts/demo.sh     # replay at the recorded 10 Hz (default: 2x)
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
 mild_install_deps
-mild_configure_and_build --target mild_offline
+mild_configure_and_build --target mild_lcd_nodelet mild_lcd_node mild_bags mild_score mild_offline
+mild_source_devel
 
 SAMPLE="$REPO/sample/corridor"
+BAG="$BUILD_DIR/bags/sample_corridor.bag"
 OUT="$BUILD_DIR/demo"
+FRAMES=$(ls "$SAMPLE/images" | wc -l)
 mkdir -p "$OUT"
-echo "[mild_lcd] offline run over $SAMPLE ($(ls "$SAMPLE/images" | wc -l) frames)"
+
+# A private master on a free port, so that a roscore the user already runs is left alone.
+PORT=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])')
+export ROS_MASTER_URI="http://localhost:$PORT"
+STARTED=()
+stop_started() {
+  for pid in "${STARTED[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  for pid in "${STARTED[@]}"; do wait "$pid" 2>/dev/null || true; done
+}
+trap stop_started EXIT
+
+roscore -p "$PORT" >"$OUT/roscore.log" 2>&1 &
+STARTED+=($!)
+for _ in $(seq 100); do
+  rosparam get /rosdistro >/dev/null 2>&1 && break
+  sleep 0.2
+done
+rosparam get /rosdistro >/dev/null 2>&1 || { echo "[mild_lcd] roscore did not start (see $OUT/roscore.log)" >&2; exit 1; }
+
+echo "[mild_lcd] replaying $BAG ($FRAMES keyframes) through mild_lcd/LoopClosureNodelet on $ROS_MASTER_URI"
+roslaunch --wait mild_lcd replay.launch bag:="$BAG" image:=/camera/image rate:="${RATE:-2}" frames:="$FRAMES" \
+  gt:="$SAMPLE/gt_loops.txt" output_csv:="$OUT/ros_candidates.csv" >"$OUT/roslaunch.log" 2>&1 &
+LAUNCH=$!
+STARTED=("$LAUNCH" "${STARTED[@]}")
+# The printer's lines (loop closures, score) as they arrive; roslaunch ends when the printer does.
+tail -n +1 -f "$OUT/roslaunch.log" --pid="$LAUNCH" | grep --line-buffered -E '^(loop closure|processed|score|recall|average|max F1|loop queries|only)'
+wait "$LAUNCH" || { echo "[mild_lcd] the replay failed (see $OUT/roslaunch.log)" >&2; exit 1; }
+STARTED=("${STARTED[@]:1}")
+
+echo "[mild_lcd] offline runner over the same frames, with plots"
 "$BUILD_DIR/devel/lib/mild_lcd/mild_offline" --images "$SAMPLE" --gt "$SAMPLE/gt_loops.txt" \
-  --output "$OUT/candidates.csv" --stats "$OUT/stats.json" --plots "$OUT"
-echo "[mild_lcd] loop closures with probability >= 0.5 (query -> candidate):"
-awk -F, 'NR > 1 && $3 >= 0.5 && !seen[$1]++ { printf "  %s -> %s  p=%.3f\n", $1, $2, $3 }' "$OUT/candidates.csv"
-echo "[mild_lcd] candidates: $OUT/candidates.csv, plots: $OUT/pr_curve.png $OUT/loops_matrix.png, timing: $OUT/stats.json"
+  --output "$OUT/candidates.csv" --stats "$OUT/stats.json" --plots "$OUT" | grep -E '^(recall|average|max F1)'
+echo "[mild_lcd] outputs in $OUT: ros_candidates.csv, candidates.csv, pr_curve.png, loops_matrix.png, stats.json"

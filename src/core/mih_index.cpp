@@ -24,16 +24,16 @@ void addMasks(int length, int radius, int first_bit, uint64_t mask, std::vector<
 
 void MihParams::validate() const {
   if (num_tables < SubstringLayout::kMinSubstrings || num_tables > SubstringLayout::kMaxSubstrings) {
-    throw InvalidInput("num_tables must be in [" + std::to_string(SubstringLayout::kMinSubstrings) + ", " +
+    throw InvalidInput("index/num_tables must be in [" + std::to_string(SubstringLayout::kMinSubstrings) + ", " +
                        std::to_string(SubstringLayout::kMaxSubstrings) + "], got " + std::to_string(num_tables));
   }
   if (radius < 0 || radius > kMaxRadius) {
-    throw InvalidInput("radius must be in [0, " + std::to_string(kMaxRadius) + "], got " + std::to_string(radius));
+    throw InvalidInput("index/radius must be in [0, " + std::to_string(kMaxRadius) + "], got " + std::to_string(radius));
   }
   if (!(bucket_cap_factor > 0.0) || !std::isfinite(bucket_cap_factor)) {
-    throw InvalidInput("bucket_cap_factor must be a positive number, got " + std::to_string(bucket_cap_factor));
+    throw InvalidInput("index/bucket_cap_factor must be a positive number, got " + std::to_string(bucket_cap_factor));
   }
-  if (min_bucket_cap < 1) throw InvalidInput("min_bucket_cap must be at least 1");
+  if (min_bucket_cap < 1) throw InvalidInput("index/min_bucket_cap must be at least 1");
 }
 
 const MihIndex::Bucket* MihIndex::Table::find(uint64_t key) const {

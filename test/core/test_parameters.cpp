@@ -57,7 +57,10 @@ TEST(Parameters, RejectsBadValuesNamingTheParameter) {
   expectRejected("orb: {num_featurs: 500}", "orb/num_featurs");               // typo
   expectRejected("orb: {num_features: many}", "orb/num_features");            // wrong type
   expectRejected("orb: {num_features: 0}", "orb/num_features");               // out of range
-  expectRejected("index: {radius: 7}", "radius");
+  expectRejected("index: {radius: 7}", "index/radius");
+  expectRejected("index: {num_tables: 3}", "index/num_tables");
+  expectRejected("similarity: {sigma2: 0}", "similarity/sigma2");
+  expectRejected("verification: {num_tables: 8}", "verification/num_tables");
   expectRejected("index: {min_bucket_cap: -3}", "index/min_bucket_cap");       // unsigned
   expectRejected("similarity: {search: fast}", "similarity/search");
   expectRejected("filter: {loop_onset: 2}", "filter/loop_onset");

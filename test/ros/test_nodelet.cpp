@@ -1,0 +1,414 @@
+// rostest node for mild_lcd/LoopClosureNodelet: a real roscore, a real nodelet manager (or the
+// standalone node), the fixture bag played by the real `rosbag play`. Each .test file in test/ros
+// selects the suites that apply to its launch configuration with --gtest_filter.
+//
+// Private parameters: ~topic (the bag topic to play), ~id_offset (keyframe id of frame 0 in the bag's
+// Keyframe messages). The fixture bag is written at build time into MILD_BAG_DIR.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <random>
+#include <set>
+
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <opencv2/imgcodecs.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/image_encodings.h>
+#include <std_srvs/Trigger.h>
+
+#include "mild_lcd/Keyframe.h"
+#include "mild_lcd/LoopClosure.h"
+#include "mild_lcd/SparseMatch.h"
+#include "mild_lcd/evaluation.hpp"
+#include "ros_test_support.hpp"
+
+namespace mild_lcd::test {
+namespace {
+
+constexpr size_t kFixtureFrames = 60;
+// A SLAM back-end acting on candidates at or above this probability.
+constexpr double kDecision = 0.5;
+constexpr double kReplayTimeout = 120.0;
+
+const std::string kFixtureBag = std::string(MILD_BAG_DIR) + "/fixture_corridor.bag";
+const std::string kFixtureDir = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+
+int idOffset() {
+  int offset = 0;
+  ros::NodeHandle("~").param("id_offset", offset, 0);
+  return offset;
+}
+
+std::vector<std::string> fixtureImages() {
+  std::vector<std::string> files;
+  for (const auto& e : std::filesystem::directory_iterator(kFixtureDir + "/images")) files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+sensor_msgs::ImagePtr fixtureImage(size_t i, double stamp) {
+  const cv::Mat image = cv::imread(fixtureImages().at(i), cv::IMREAD_GRAYSCALE);
+  std_msgs::Header header;
+  header.stamp = ros::Time(stamp);
+  return cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, image).toImageMsg();
+}
+
+mild_lcd::SparseMatch::Response callSparseMatch(mild_lcd::SparseMatch::Request request) {
+  mild_lcd::SparseMatch srv;
+  srv.request = std::move(request);
+  EXPECT_TRUE(ros::service::waitForService("sparse_match", ros::Duration(10.0)));
+  EXPECT_TRUE(ros::service::call("sparse_match", srv)) << "the service call itself failed";
+  return srv.response;
+}
+
+// The latest value of one key of mild_lcd's diagnostic status, or "" when none arrived in time.
+std::string diagnosticValue(const std::string& key, const std::string& expected, double timeout_s) {
+  TopicLog<diagnostic_msgs::DiagnosticArray> log("/diagnostics");
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  std::string value;
+  while (ros::WallTime::now() < end) {
+    for (const auto& array : log.messages()) {
+      for (const auto& status : array.status) {
+        if (status.name.find("loop closure detector") == std::string::npos) continue;
+        for (const auto& kv : status.values) {
+          if (kv.key == key) value = kv.value;
+        }
+      }
+    }
+    if (value == expected) break;
+    ros::WallDuration(0.1).sleep();
+  }
+  return value;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Replay: the fixture bag (60 keyframes of the corridor, a revisit at 47-59) through the nodelet.
+
+class Replay : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    outputs_ = std::make_unique<TopicLog<mild_lcd::LoopClosure>>("loop_closure");
+    debug_images_ = std::make_unique<TopicLog<sensor_msgs::Image>>("debug_image", 100);
+    ASSERT_TRUE(outputs_->waitForPublisher(30.0)) << "the nodelet never advertised loop_closure";
+    ASSERT_EQ(playBag(kFixtureBag, privateParam("topic"), "-r 4"), 0) << "rosbag play failed";
+    outputs_->waitForCount(kFixtureFrames, kReplayTimeout);
+  }
+  static void TearDownTestSuite() {
+    outputs_.reset();
+    debug_images_.reset();
+  }
+
+  static std::unique_ptr<TopicLog<mild_lcd::LoopClosure>> outputs_;
+  static std::unique_ptr<TopicLog<sensor_msgs::Image>> debug_images_;
+};
+std::unique_ptr<TopicLog<mild_lcd::LoopClosure>> Replay::outputs_;
+std::unique_ptr<TopicLog<sensor_msgs::Image>> Replay::debug_images_;
+
+TEST_F(Replay, AnswersEveryKeyframeOnceInArrivalOrder) {
+  const auto msgs = outputs_->messages();
+  ASSERT_EQ(msgs.size(), kFixtureFrames);
+  for (size_t i = 0; i < msgs.size(); ++i) {
+    EXPECT_EQ(msgs[i].query_id, i + idOffset());
+    EXPECT_EQ(msgs[i].database_size, static_cast<int>(i + 1));
+    EXPECT_NEAR(msgs[i].header.stamp.toSec(), 1000.0 + 0.5 * i, 1e-6) << "the keyframe's header must come back";
+    EXPECT_GT(msgs[i].features, 100);
+    for (size_t c = 1; c < msgs[i].candidates.size(); ++c) {
+      EXPECT_GE(msgs[i].candidates[c - 1].probability, msgs[i].candidates[c].probability) << "best first";
+    }
+    for (const auto& c : msgs[i].candidates) {
+      EXPECT_LE(c.id + 8, msgs[i].query_id) << "inside the temporal exclusion";
+      EXPECT_NEAR(c.stamp.toSec(), 1000.0 + 0.5 * (c.id - idOffset()), 1e-6);
+      EXPECT_GE(c.probability, 0.0);
+      EXPECT_LE(c.probability, 1.0);
+    }
+  }
+}
+
+TEST_F(Replay, ReportsTheKnownLoopAndNoFalsePositive) {
+  const mild::GroundTruth truth = mild::loadGroundTruth(kFixtureDir + "/gt_loops.txt");
+  const auto msgs = outputs_->messages();
+  ASSERT_EQ(msgs.size(), kFixtureFrames);
+  std::set<int> detected;
+  for (const auto& msg : msgs) {
+    const int query = static_cast<int>(msg.query_id) - idOffset();
+    for (const auto& c : msg.candidates) {
+      if (c.probability < kDecision) continue;
+      const std::pair<int, int> pair(query, static_cast<int>(c.id) - idOffset());
+      EXPECT_TRUE(truth.right.count(pair) || truth.dont_care.count(pair))
+          << "false positive " << pair.first << " -> " << pair.second << " p=" << c.probability;
+      if (truth.right.count(pair) && c.verified) detected.insert(query);
+    }
+    if (!truth.loop_queries.count(query)) {
+      EXPECT_TRUE(msg.candidates.empty() || msg.candidates.front().probability < kDecision)
+          << "keyframe " << query << " has no loop but reported one";
+    }
+  }
+  EXPECT_GE(detected.size(), 3u) << "the revisit (keyframes 47-59) must be reported, verified, at p >= 0.5";
+}
+
+TEST_F(Replay, DebugImageShowsQueryAndCandidateSideBySide) {
+  const auto images = debug_images_->messages();
+  ASSERT_FALSE(images.empty()) << "debug_image had a subscriber but nothing was published";
+  const auto& last = images.back();
+  EXPECT_EQ(last.encoding, sensor_msgs::image_encodings::BGR8);
+  EXPECT_EQ(last.width, 320u) << "two half-resolution 320x240 frames side by side";
+  EXPECT_EQ(last.height, 120u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The sparse_match service, against the database the replay filled.
+
+TEST(SparseMatchService, MatchesTwoStoredLoopFramesAndVerifiesThem) {
+  mild_lcd::SparseMatch::Request request;
+  request.query_id = 59 + idOffset();
+  request.train_id = 9 + idOffset();
+  const auto response = callSparseMatch(request);
+  ASSERT_TRUE(response.success) << response.message;
+  EXPECT_GT(response.matches.size(), 50u);
+  EXPECT_TRUE(response.model_fitted);
+  EXPECT_EQ(response.inlier_mask.size(), response.matches.size());
+  EXPECT_EQ(response.model.size(), 9u);
+  EXPECT_TRUE(response.verified);
+  EXPECT_GE(response.inliers, 30);
+  for (const auto& m : response.matches) {
+    EXPECT_GE(m.query, 0);
+    EXPECT_GE(m.train, 0);
+    EXPECT_LE(m.distance, 64);
+  }
+}
+
+TEST(SparseMatchService, UnknownIdsAreReportedAndTheNodeletKeepsServing) {
+  mild_lcd::SparseMatch::Request request;
+  request.query_id = 123456;
+  request.train_id = 9 + idOffset();
+  auto response = callSparseMatch(request);
+  EXPECT_FALSE(response.success);
+  EXPECT_NE(response.message.find("unknown query_id 123456"), std::string::npos) << response.message;
+  EXPECT_TRUE(response.matches.empty());
+
+  request.query_id = 58 + idOffset();
+  request.train_id = 8 + idOffset();
+  response = callSparseMatch(request);
+  EXPECT_TRUE(response.success) << response.message;
+}
+
+TEST(SparseMatchService, MalformedRequestsAreReportedNotCrashed) {
+  struct Case {
+    const char* what;
+    mild_lcd::SparseMatch::Request request;
+    const char* message;
+  };
+  std::vector<Case> cases;
+  mild_lcd::SparseMatch::Request r;
+  r.use_descriptors = true;
+  r.query_descriptors.assign(33, 1);
+  r.train_descriptors.assign(32, 1);
+  cases.push_back({"33 descriptor bytes", r, "multiple of 32"});
+  r.query_descriptors.clear();
+  cases.push_back({"empty query descriptors", r, "query_descriptors is empty"});
+  r.query_descriptors.assign(64, 1);
+  r.query_keypoints.resize(3);
+  cases.push_back({"3 keypoints for 2 descriptors", r, "3 keypoints"});
+  mild_lcd::SparseMatch::Request by_id;
+  by_id.query_descriptors.assign(32, 1);
+  cases.push_back({"descriptors without use_descriptors", by_id, "use_descriptors is false"});
+  for (const Case& c : cases) {
+    const auto response = callSparseMatch(c.request);
+    EXPECT_FALSE(response.success) << c.what;
+    EXPECT_NE(response.message.find(c.message), std::string::npos) << c.what << ": " << response.message;
+  }
+}
+
+TEST(SparseMatchService, MatchesDescriptorsGivenInTheRequest) {
+  std::mt19937_64 rng(7);
+  mild_lcd::SparseMatch::Request request;
+  request.use_descriptors = true;
+  for (int i = 0; i < 200; ++i) {
+    uint8_t row[32];
+    for (uint8_t& b : row) b = static_cast<uint8_t>(rng());
+    request.train_descriptors.insert(request.train_descriptors.end(), row, row + 32);
+    row[i % 32] ^= 0x5;  // 2 bits apart
+    request.query_descriptors.insert(request.query_descriptors.end(), row, row + 32);
+  }
+  const auto response = callSparseMatch(request);
+  ASSERT_TRUE(response.success) << response.message;
+  ASSERT_EQ(response.matches.size(), 200u);
+  for (const auto& m : response.matches) {
+    EXPECT_EQ(m.query, m.train);
+    EXPECT_EQ(m.distance, 2);
+  }
+  EXPECT_FALSE(response.model_fitted) << "no keypoints, no geometry";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input: rejected, counted in diagnostics, and nothing lost.
+
+TEST(BadInput, IsRejectedAndCountedAndLaterKeyframesAreStillProcessed) {
+  ros::NodeHandle nh;
+  ros::Publisher images = nh.advertise<sensor_msgs::Image>("/camera/image", 10);
+  ros::Publisher keyframes = nh.advertise<mild_lcd::Keyframe>("/camera/keyframe", 10);
+  TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
+  ASSERT_TRUE(outputs.waitForPublisher(10.0));
+  ASSERT_TRUE(waitForSubscriber(images, 10.0));
+  ASSERT_TRUE(waitForSubscriber(keyframes, 10.0));
+  const std::string rejected_before = diagnosticValue("rejected keyframes", "0", 5.0);
+
+  sensor_msgs::Image float_image;  // an encoding the detector cannot use
+  float_image.width = float_image.height = 8;
+  float_image.encoding = "32FC1";
+  float_image.step = 32;
+  float_image.data.assign(8 * 32, 0);
+  images.publish(float_image);
+  sensor_msgs::Image empty;  // zero-size
+  empty.encoding = "mono8";
+  images.publish(empty);
+  sensor_msgs::Image short_data;  // fewer bytes than its size declares
+  short_data.width = short_data.height = 100;
+  short_data.encoding = "mono8";
+  short_data.step = 100;
+  short_data.data.assign(10, 0);
+  images.publish(short_data);
+  mild_lcd::Keyframe mismatch;  // 2 keypoints, 33 bytes of descriptors
+  mismatch.keypoints.resize(2);
+  mismatch.descriptors.assign(33, 0);
+  keyframes.publish(mismatch);
+  ros::WallDuration(0.5).sleep();  // the four are queued before the good one
+  images.publish(fixtureImage(0, 5000.0));
+
+  ASSERT_TRUE(outputs.waitForCount(1, 30.0)) << "the good keyframe after the bad ones was not processed";
+  ros::WallDuration(0.5).sleep();
+  const auto msgs = outputs.messages();
+  ASSERT_EQ(msgs.size(), 1u) << "a rejected keyframe must not be answered";
+  EXPECT_EQ(msgs[0].query_id, kFixtureFrames + idOffset()) << "ids continue after the rejected keyframes";
+  EXPECT_EQ(msgs[0].database_size, static_cast<int>(kFixtureFrames + 1));
+  EXPECT_NEAR(msgs[0].header.stamp.toSec(), 5000.0, 1e-6);
+  const int expected = std::stoi(rejected_before.empty() ? "0" : rejected_before) + 4;
+  EXPECT_EQ(diagnosticValue("rejected keyframes", std::to_string(expected), 10.0), std::to_string(expected));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Keyframe input specifics (run where the keyframe input is enabled).
+
+TEST(KeyframeIds, AreAssignedWhenMissingAndPublishedBack) {
+  ros::NodeHandle nh;
+  ros::Publisher keyframes = nh.advertise<mild_lcd::Keyframe>("/camera/keyframe", 10);
+  TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
+  ASSERT_TRUE(outputs.waitForPublisher(10.0));
+  ASSERT_TRUE(waitForSubscriber(keyframes, 10.0));
+  mild_lcd::Keyframe kf;  // no id: the next free one (largest so far + 1) is assigned
+  kf.header.stamp = ros::Time(6000.0);
+  kf.keypoints.resize(1);
+  kf.keypoints[0].x = kf.keypoints[0].y = 10.0f;
+  kf.descriptors.assign(32, 0xA5);
+  keyframes.publish(kf);
+  ASSERT_TRUE(outputs.waitForCount(1, 20.0));
+  const uint64_t assigned = outputs.messages()[0].query_id;
+  EXPECT_GE(assigned, kFixtureFrames + idOffset());
+
+  mild_lcd::SparseMatch::Request request;  // the assigned id names the keyframe from now on
+  request.query_id = assigned;
+  request.train_id = assigned;
+  const auto response = callSparseMatch(request);
+  EXPECT_TRUE(response.success) << response.message;
+  EXPECT_EQ(response.matches.size(), 1u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// reset, last: it empties the database the other suites use.
+
+TEST(ResetService, EmptiesTheDatabaseAndRestartsTheIds) {
+  std_srvs::Trigger trigger;
+  ASSERT_TRUE(ros::service::waitForService("reset", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::call("reset", trigger));
+  EXPECT_TRUE(trigger.response.success);
+  EXPECT_NE(trigger.response.message.find("cleared"), std::string::npos) << trigger.response.message;
+
+  mild_lcd::SparseMatch::Request request;  // nothing stored any more
+  request.query_id = 59 + idOffset();
+  request.train_id = 9 + idOffset();
+  EXPECT_FALSE(callSparseMatch(request).success);
+
+  ros::NodeHandle nh;
+  ros::Publisher images = nh.advertise<sensor_msgs::Image>("/camera/image", 10);
+  TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
+  ASSERT_TRUE(outputs.waitForPublisher(10.0));
+  ASSERT_TRUE(waitForSubscriber(images, 10.0));
+  images.publish(fixtureImage(3, 7000.0));
+  ASSERT_TRUE(outputs.waitForCount(1, 20.0));
+  EXPECT_EQ(outputs.messages()[0].query_id, 0u);
+  EXPECT_EQ(outputs.messages()[0].database_size, 1);
+  EXPECT_TRUE(outputs.messages()[0].candidates.empty());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Determinism: the same bag at 1x and as fast as rosbag can play it gives the same answers.
+
+std::vector<mild_lcd::LoopClosure> replayOnce(const std::string& rate_args) {
+  std_srvs::Trigger trigger;
+  EXPECT_TRUE(ros::service::waitForService("reset", ros::Duration(10.0)));
+  EXPECT_TRUE(ros::service::call("reset", trigger));
+  TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
+  EXPECT_TRUE(outputs.waitForPublisher(30.0));
+  EXPECT_EQ(playBag(kFixtureBag, privateParam("topic"), rate_args), 0);
+  EXPECT_TRUE(outputs.waitForCount(kFixtureFrames, kReplayTimeout));
+  ros::WallDuration(0.5).sleep();
+  return outputs.messages();
+}
+
+TEST(Determinism, SameBagAtTwoRatesGivesIdenticalLoopClosures) {
+  const auto slow = replayOnce("-r 1");
+  const auto fast = replayOnce("--immediate");
+  ASSERT_EQ(slow.size(), kFixtureFrames);
+  ASSERT_EQ(fast.size(), kFixtureFrames);
+  size_t candidates = 0;
+  for (size_t i = 0; i < kFixtureFrames; ++i) {
+    EXPECT_EQ(slow[i].query_id, fast[i].query_id);
+    EXPECT_EQ(slow[i].header.stamp, fast[i].header.stamp);
+    ASSERT_EQ(slow[i].candidates.size(), fast[i].candidates.size()) << "keyframe " << i;
+    for (size_t c = 0; c < slow[i].candidates.size(); ++c) {
+      const auto& a = slow[i].candidates[c];
+      const auto& b = fast[i].candidates[c];
+      EXPECT_EQ(a.id, b.id);
+      EXPECT_EQ(a.probability, b.probability) << "bit-identical, not merely close";
+      EXPECT_EQ(a.similarity, b.similarity);
+      EXPECT_EQ(a.inliers, b.inliers);
+      EXPECT_EQ(a.verified, b.verified);
+      ++candidates;
+    }
+  }
+  EXPECT_GT(candidates, 0u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Start-up validation: an invalid parameter stops the node with a message naming it.
+
+TEST(StartUp, InvalidParameterIsRejectedNamingIt) {
+  std::string output;
+  const int status = runCapturing(
+      "timeout 30 rosrun mild_lcd mild_lcd_node __name:=broken_lcd __ns:=/broken _index/num_tables:=3", output);
+  EXPECT_NE(status, 0) << output;
+  EXPECT_NE(status, 124) << "the node kept running with an invalid parameter";
+  EXPECT_NE(output.find("index/num_tables"), std::string::npos) << output;
+
+  const int typo = runCapturing(
+      "timeout 30 rosrun mild_lcd mild_lcd_node __name:=typo_lcd __ns:=/typo _filter/loop_persistance:=0.9", output);
+  EXPECT_NE(typo, 0) << output;
+  EXPECT_NE(output.find("loop_persistance"), std::string::npos) << output;
+}
+
+}  // namespace
+}  // namespace mild_lcd::test
+
+int main(int argc, char** argv) {
+  ::testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_mild_lcd_nodelet");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  const int result = RUN_ALL_TESTS();
+  ros::shutdown();
+  return result;
+}
