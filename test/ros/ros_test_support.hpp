@@ -6,7 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <condition_variable>
-#include <cstdio>
 #include <cstdlib>
 #include <mutex>
 #include <string>
@@ -83,18 +82,6 @@ inline int playBag(const std::string& bag, const std::string& topic, const std::
   const std::string command = "rosbag play --quiet --wait-for-subscribers " + rate_args + " '" + bag + "' --topics " +
                               topic + " > /dev/null 2>&1";
   return std::system(command.c_str());
-}
-
-// Runs a command, returning its exit status and what it printed (stdout and stderr).
-inline int runCapturing(const std::string& command, std::string& output) {
-  output.clear();
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  if (pipe == nullptr) return -1;
-  char buffer[4096];
-  size_t n;
-  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) output.append(buffer, n);
-  const int status = pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 }  // namespace mild_lcd::test

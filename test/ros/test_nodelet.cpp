@@ -24,6 +24,7 @@
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SparseMatch.h"
 #include "mild_lcd/evaluation.hpp"
+#include "../common/run_command.hpp"
 #include "ros_test_support.hpp"
 
 namespace mild_lcd::test {
@@ -387,17 +388,16 @@ TEST(Determinism, SameBagAtTwoRatesGivesIdenticalLoopClosures) {
 // Start-up validation: an invalid parameter stops the node with a message naming it.
 
 TEST(StartUp, InvalidParameterIsRejectedNamingIt) {
-  std::string output;
-  const int status = runCapturing(
-      "timeout 30 rosrun mild_lcd mild_lcd_node __name:=broken_lcd __ns:=/broken _index/num_tables:=3", output);
-  EXPECT_NE(status, 0) << output;
-  EXPECT_NE(status, 124) << "the node kept running with an invalid parameter";
-  EXPECT_NE(output.find("index/num_tables"), std::string::npos) << output;
+  const auto invalid =
+      mild::test::runCommand("timeout 30 rosrun mild_lcd mild_lcd_node __name:=broken_lcd __ns:=/broken _index/num_tables:=3");
+  EXPECT_NE(invalid.status, 0) << invalid.output;
+  EXPECT_NE(invalid.status, 124) << "the node kept running with an invalid parameter";
+  EXPECT_NE(invalid.output.find("index/num_tables"), std::string::npos) << invalid.output;
 
-  const int typo = runCapturing(
-      "timeout 30 rosrun mild_lcd mild_lcd_node __name:=typo_lcd __ns:=/typo _filter/loop_persistance:=0.9", output);
-  EXPECT_NE(typo, 0) << output;
-  EXPECT_NE(output.find("loop_persistance"), std::string::npos) << output;
+  const auto typo = mild::test::runCommand(
+      "timeout 30 rosrun mild_lcd mild_lcd_node __name:=typo_lcd __ns:=/typo _filter/loop_persistance:=0.9");
+  EXPECT_NE(typo.status, 0) << typo.output;
+  EXPECT_NE(typo.output.find("loop_persistance"), std::string::npos) << typo.output;
 }
 
 }  // namespace

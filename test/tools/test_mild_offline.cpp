@@ -1,8 +1,6 @@
 // Runs the installed-style mild_offline binary the way a user would and checks its contract.
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -11,6 +9,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "../common/run_command.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -18,22 +18,9 @@ namespace {
 const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
 const std::string kFixtureConfig = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5.yaml";
 
-struct ProcessResult {
-  int status = -1;
-  std::string output;  // stdout and stderr
-};
+using ProcessResult = mild::test::CommandResult;
 
-ProcessResult mildOffline(const std::string& args) {
-  const std::string command = std::string(MILD_OFFLINE_BIN) + " " + args + " 2>&1";
-  ProcessResult run;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (pipe == nullptr) return run;
-  char buffer[4096];
-  while (fgets(buffer, sizeof(buffer), pipe)) run.output += buffer;
-  const int raw = pclose(pipe);
-  run.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  return run;
-}
+ProcessResult mildOffline(const std::string& args) { return mild::test::runCommand(std::string(MILD_OFFLINE_BIN) + " " + args); }
 
 class MildOffline : public ::testing::Test {
  protected:
