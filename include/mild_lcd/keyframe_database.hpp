@@ -56,6 +56,9 @@ class KeyframeDatabase {
   explicit KeyframeDatabase(const DatabaseParams& params = {});
 
   const DatabaseParams& params() const { return params_; }
+  // Similarity parameters do not shape the index, so they can change at any time (live tuning).
+  // Throws InvalidInput, changing nothing, when they are invalid.
+  void setSimilarityParams(const SimilarityParams& params);
 
   // Adds a keyframe and returns its index. The cv::Mat overload throws InvalidInput (and adds
   // nothing) unless the matrix is N x 32 CV_8U. A keyframe may have no features.
@@ -78,7 +81,7 @@ class KeyframeDatabase {
   size_t featureCount() const { return heads_.size(); }
   size_t featureCount(KeyframeIndex k) const { return keyframe_offsets_[k + 1] - keyframe_offsets_[k]; }
   FeatureId firstFeature(KeyframeIndex k) const { return keyframe_offsets_[k]; }
-  KeyframeIndex keyframeOf(FeatureId f) const { return feature_keyframe_[f]; }
+  KeyframeIndex keyframeOf(FeatureId f) const;
   Descriptor descriptor(FeatureId f) const;
   DescriptorList descriptors(KeyframeIndex k) const;
 
@@ -88,13 +91,13 @@ class KeyframeDatabase {
 
  private:
   using Tail = std::array<uint64_t, kDescriptorWords - 1>;
+  int fullDistance(const Descriptor& q, FeatureId f) const;
 
   DatabaseParams params_;
   PhiTable phi_;
   MihIndex index_;
   std::vector<uint64_t> heads_;  // first 64 bits of every feature
   std::vector<Tail> tails_;      // remaining 192 bits
-  std::vector<KeyframeIndex> feature_keyframe_;
   std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
 };
 

@@ -38,6 +38,14 @@ struct ProbeCounters {
 // Multi-index hash tables over feature ids. The index stores ids only; descriptors live with the
 // caller (KeyframeDatabase, SparseMatcher), which is what lets a candidate be rejected on its first
 // 64 bits without touching the rest.
+//
+// Layout, per table. Buckets are slots: the substring value itself for substrings up to 20 bits
+// (every slot preallocated), or a slot number handed out on first use for longer substrings.
+// Settled entries sit in one contiguous array, bucket after bucket (compressed sparse rows), so a
+// probe reads a bucket's ids in one sequential run; entries added since the last merge sit in
+// per-bucket chains. When the chains of a table hold more than 1/16 of its settled entries they
+// are merged into the array: each entry is copied a bounded number of times over its life, and
+// no bucket carries the spare capacity (or the 24-byte header) of a vector of its own.
 class MihIndex {
  public:
   explicit MihIndex(const MihParams& params);
@@ -52,9 +60,14 @@ class MihIndex {
   void insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id);
 
   // Calls visit(feature_id, table) for every stored id below id_limit in every live bucket within
-  // radius r of q's substrings. Within a bucket ids come in insertion order.
+  // radius r of q's substrings (in no particular order within a bucket).
   template <class Visit>
   void probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+
+  // The same ids appended to `out`, table after table, for callers that process them in bulk.
+  void gather(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, std::vector<FeatureId>& out) const {
+    probe(q, id_limit, counters, [&out](FeatureId id, int) { out.push_back(id); });
+  }
 
   // True when substring t of a and b are within the probe radius, i.e. the pair meets in table t.
   bool meetsInTable(const Descriptor& a, const Descriptor& b, int t) const;
@@ -65,20 +78,34 @@ class MihIndex {
   void clear();
 
  private:
-  struct Bucket {
-    std::vector<FeatureId> ids;
-    bool discarded = false;
+  static constexpr uint32_t kNone = 0xFFFFFFFFu;       // no slot, or the end of a chain
+  static constexpr uint32_t kDiscarded = 0xFFFFFFFEu;  // in place of a chain: the bucket went over its cap
+
+  struct Link {
+    FeatureId id;
+    uint32_t next;
+  };
+  // What a probe reads of a bucket, in one place: its settled run starts at `offset` and ends where
+  // the next slot's starts; `recent` is its newest recent link, kNone, or kDiscarded.
+  struct Slot {
+    uint32_t offset;
+    uint32_t recent;
   };
   struct Table {
     bool dense = true;
-    std::vector<Bucket> dense_buckets;
-    std::unordered_map<uint64_t, Bucket> sparse_buckets;
+    std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
+    std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
+    std::vector<FeatureId> ids;                      // settled entries, bucket after bucket
+    std::vector<uint32_t> count;                     // entries per bucket, settled and recent
+    std::vector<Link> recent;
+    size_t entries = 0;
 
-    const Bucket* find(uint64_t key) const;
-    Bucket& at(uint64_t key);
+    uint32_t find(uint64_t key) const;
+    uint32_t findOrAdd(uint64_t key);
   };
 
   size_t bucketCap(int t) const;
+  void merge(Table& table);
 
   MihParams params_;
   SubstringLayout layout_;
@@ -92,21 +119,54 @@ class MihIndex {
 
 template <class Visit>
 void MihIndex::probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
+  // Buckets are scattered in memory. Their slots are requested in a batch first, then their runs,
+  // so that the loads overlap instead of following one another.
+  constexpr size_t kBatch = 64;
+  struct Pending {
+    const Table* table;
+    uint32_t slot;
+    int t;
+  };
+  Pending batch[kBatch];
+  size_t pending = 0;
+  const auto drain = [&] {
+    for (size_t i = 0; i < pending; ++i) {
+      const Slot& s = batch[i].table->slots[batch[i].slot];
+      __builtin_prefetch(batch[i].table->ids.data() + s.offset);
+    }
+    for (size_t i = 0; i < pending; ++i) {
+      const Table& table = *batch[i].table;
+      const Slot& s = table.slots[batch[i].slot];
+      if (s.recent == kDiscarded) continue;
+      const FeatureId* run = table.ids.data() + s.offset;
+      const FeatureId* end = table.ids.data() + table.slots[batch[i].slot + 1].offset;
+      for (; run != end && *run < id_limit; ++run) {  // settled ids ascend within a bucket
+        ++counters.entries_visited;
+        visit(*run, batch[i].t);
+      }
+      for (uint32_t link = s.recent; link != kNone; link = table.recent[link].next) {
+        const FeatureId id = table.recent[link].id;
+        if (id >= id_limit) continue;  // recent ids descend: newest first
+        ++counters.entries_visited;
+        visit(id, batch[i].t);
+      }
+    }
+    pending = 0;
+  };
   const int m = layout_.count();
   for (int t = 0; t < m; ++t) {
     const uint64_t key = layout_.key(q, t);
     const Table& table = tables_[t];
     for (uint64_t flip : probe_masks_[layout_.length(t)]) {
-      const Bucket* bucket = table.find(key ^ flip);
       ++counters.buckets_probed;
-      if (bucket == nullptr || bucket->discarded) continue;
-      for (FeatureId id : bucket->ids) {
-        if (id >= id_limit) break;  // ids ascend within a bucket
-        ++counters.entries_visited;
-        visit(id, t);
-      }
+      const uint32_t slot = table.find(key ^ flip);
+      if (slot == kNone) continue;
+      __builtin_prefetch(&table.slots[slot]);
+      batch[pending++] = {&table, slot, t};
+      if (pending == kBatch) drain();
     }
   }
+  drain();
 }
 
 }  // namespace mild

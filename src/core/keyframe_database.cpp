@@ -80,11 +80,16 @@ KeyframeDatabase::KeyframeDatabase(const DatabaseParams& params)
   keyframe_offsets_.push_back(0);
 }
 
+void KeyframeDatabase::setSimilarityParams(const SimilarityParams& params) {
+  params.validate();
+  params_.similarity = params;
+  phi_ = PhiTable(params);
+}
+
 void KeyframeDatabase::clear() {
   index_.clear();
   heads_.clear();
   tails_.clear();
-  feature_keyframe_.clear();
   keyframe_offsets_.assign(1, 0);
 }
 
@@ -100,11 +105,22 @@ KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
   for (const Descriptor& d : descriptors) {
     heads_.push_back(d.words[0]);
     tails_.push_back({d.words[1], d.words[2], d.words[3]});
-    feature_keyframe_.push_back(k);
   }
   index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
   keyframe_offsets_.push_back(static_cast<FeatureId>(total));
   return k;
+}
+
+KeyframeIndex KeyframeDatabase::keyframeOf(FeatureId f) const {
+  // keyframe_offsets_ ascends; keyframe k owns [offsets[k], offsets[k+1]).
+  const auto it = std::upper_bound(keyframe_offsets_.begin(), keyframe_offsets_.end(), f);
+  return static_cast<KeyframeIndex>(it - keyframe_offsets_.begin() - 1);
+}
+
+int KeyframeDatabase::fullDistance(const Descriptor& q, FeatureId f) const {
+  const Tail& tail = tails_[f];
+  return popcount64(q.words[0] ^ heads_[f]) + popcount64(q.words[1] ^ tail[0]) + popcount64(q.words[2] ^ tail[1]) +
+         popcount64(q.words[3] ^ tail[2]);
 }
 
 Descriptor KeyframeDatabase::descriptor(FeatureId f) const {
@@ -139,32 +155,53 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   VoteAccumulator accumulator(sp, n, result.similarity);
   std::vector<Vote> votes;
 
+  std::vector<FeatureId> candidates;
+  struct Survivor {
+    FeatureId id;
+    int partial;
+  };
+  std::vector<Survivor> survivors;
   for (const Descriptor& f : q) {
     votes.clear();
     if (mode == SearchMode::kExact) {
+      stats.full_distances += id_limit;
       for (FeatureId id = 0; id < id_limit; ++id) {
-        ++stats.full_distances;
-        const int d = hammingDistance(f, descriptor(id));
-        if (d <= d0) votes.push_back({id, feature_keyframe_[id], phi_(d)});
+        const int d = fullDistance(f, id);
+        if (d <= d0) votes.push_back({id, 0, phi_(d)});
       }
     } else {
       ProbeCounters counters;
-      index_.probe(f, id_limit, counters, [&](FeatureId id, int) {
+      candidates.clear();
+      index_.gather(f, id_limit, counters, candidates);
+      // Candidates are scattered over the whole database, so each check waits for memory. Two
+      // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
+      // requested while one is checked, then the rest of the survivors likewise.
+      constexpr size_t kAhead = 16;
+      const size_t n_candidates = candidates.size();
+      survivors.clear();
+      for (size_t c = 0; c < n_candidates; ++c) {
+        if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
+        const FeatureId id = candidates[c];
         const int partial = popcount64(f.words[0] ^ heads_[id]);
-        if (partial > tp) {
-          ++stats.early_rejections;
-          return;
-        }
-        ++stats.full_distances;
+        if (partial > tp) continue;
+        survivors.push_back({id, partial});
+      }
+      stats.early_rejections += n_candidates - survivors.size();
+      stats.full_distances += survivors.size();
+      for (size_t c = 0; c < survivors.size(); ++c) {
+        if (c + kAhead < survivors.size()) __builtin_prefetch(&tails_[survivors[c + kAhead].id]);
+        const auto [id, partial] = survivors[c];
         const Tail& tail = tails_[id];
         const int d = partial + popcount64(f.words[1] ^ tail[0]) + popcount64(f.words[2] ^ tail[1]) +
                       popcount64(f.words[3] ^ tail[2]);
-        if (d <= d0) votes.push_back({id, feature_keyframe_[id], phi_(d)});
-      });
+        if (d <= d0) votes.push_back({id, 0, phi_(d)});
+      }
       removeDuplicateVotes(votes);
       stats.buckets_probed += counters.buckets_probed;
       stats.candidates_visited += counters.entries_visited;
     }
+    // Only votes need their keyframe, and they are few: look it up rather than store it per feature.
+    for (Vote& v : votes) v.keyframe = keyframeOf(v.feature);
     stats.votes += votes.size();
     accumulator.addFeatureVotes(votes);
   }
@@ -187,7 +224,7 @@ QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, 
 
 size_t KeyframeDatabase::memoryBytes() const {
   return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(Tail) +
-         feature_keyframe_.capacity() * sizeof(KeyframeIndex) + keyframe_offsets_.capacity() * sizeof(FeatureId);
+         keyframe_offsets_.capacity() * sizeof(FeatureId);
 }
 
 }  // namespace mild

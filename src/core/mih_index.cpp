@@ -36,13 +36,21 @@ void MihParams::validate() const {
   if (min_bucket_cap < 1) throw InvalidInput("index/min_bucket_cap must be at least 1");
 }
 
-const MihIndex::Bucket* MihIndex::Table::find(uint64_t key) const {
-  if (dense) return &dense_buckets[key];
-  auto it = sparse_buckets.find(key);
-  return it == sparse_buckets.end() ? nullptr : &it->second;
+uint32_t MihIndex::Table::find(uint64_t key) const {
+  if (dense) return static_cast<uint32_t>(key);
+  auto it = slot_of.find(key);
+  return it == slot_of.end() ? kNone : it->second;
 }
 
-MihIndex::Bucket& MihIndex::Table::at(uint64_t key) { return dense ? dense_buckets[key] : sparse_buckets[key]; }
+uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
+  if (dense) return static_cast<uint32_t>(key);
+  auto [it, added] = slot_of.emplace(key, static_cast<uint32_t>(count.size()));
+  if (added) {  // a new, empty bucket before the end sentinel
+    slots.insert(slots.end() - 1, Slot{slots.back().offset, kNone});
+    count.push_back(0);
+  }
+  return it->second;
+}
 
 MihIndex::MihIndex(const MihParams& params) : params_(params), layout_((params.validate(), params.num_tables)) {
   probe_masks_.resize(layout_.maxLength() + 1);
@@ -58,7 +66,9 @@ void MihIndex::clear() {
   for (int t = 0; t < layout_.count(); ++t) {
     Table& table = tables_[t];
     table.dense = layout_.length(t) <= kMaxDenseBits;
-    if (table.dense) table.dense_buckets.resize(size_t{1} << layout_.length(t));
+    const size_t slots = table.dense ? size_t{1} << layout_.length(t) : 0;
+    table.slots.assign(slots + 1, Slot{0, kNone});
+    table.count.assign(slots, 0);
   }
   entry_count_ = 0;
   discarded_buckets_ = 0;
@@ -77,20 +87,49 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
     Table& table = tables_[t];
     const size_t cap = bucketCap(t);
     for (size_t i = 0; i < count; ++i) {
-      Bucket& bucket = table.at(layout_.key(descriptors[i], t));
-      if (bucket.discarded) continue;
-      if (!bucket.ids.empty() && bucket.ids.back() >= first_id) continue;  // this keyframe is already here
-      if (params_.cap_buckets && bucket.ids.size() >= cap) {
-        entry_count_ -= bucket.ids.size();
-        std::vector<FeatureId>().swap(bucket.ids);
-        bucket.discarded = true;
+      const uint32_t slot = table.findOrAdd(layout_.key(descriptors[i], t));
+      uint32_t& head = table.slots[slot].recent;
+      if (head == kDiscarded) continue;
+      if (head != kNone && table.recent[head].id >= first_id) continue;  // this keyframe is already here
+      uint32_t& entries = table.count[slot];
+      if (params_.cap_buckets && entries >= cap) {
+        // Discarded: ignored from now on; its entries leave memory at the next merge.
+        entry_count_ -= entries;
+        table.entries -= entries;
+        entries = 0;
+        head = kDiscarded;
         ++discarded_buckets_;
         continue;
       }
-      bucket.ids.push_back(first_id + static_cast<FeatureId>(i));
+      table.recent.push_back({first_id + static_cast<FeatureId>(i), head});
+      head = static_cast<uint32_t>(table.recent.size() - 1);
+      ++entries;
+      ++table.entries;
       ++entry_count_;
     }
+    if (table.recent.size() > std::max<size_t>(4096, table.ids.size() / 64)) merge(table);
   }
+}
+
+void MihIndex::merge(Table& table) {
+  const size_t slots = table.count.size();
+  std::vector<FeatureId> ids;
+  ids.reserve(table.entries);
+  std::vector<FeatureId> chain;
+  for (size_t s = 0; s < slots; ++s) {
+    Slot& slot = table.slots[s];
+    const uint32_t begin = slot.offset, end = table.slots[s + 1].offset;
+    slot.offset = static_cast<uint32_t>(ids.size());
+    if (slot.recent == kDiscarded) continue;
+    ids.insert(ids.end(), table.ids.begin() + begin, table.ids.begin() + end);
+    chain.clear();
+    for (uint32_t link = slot.recent; link != kNone; link = table.recent[link].next) chain.push_back(table.recent[link].id);
+    ids.insert(ids.end(), chain.rbegin(), chain.rend());  // oldest first: ids keep ascending
+    slot.recent = kNone;
+  }
+  table.slots[slots].offset = static_cast<uint32_t>(ids.size());
+  table.ids = std::move(ids);
+  table.recent.clear();
 }
 
 bool MihIndex::meetsInTable(const Descriptor& a, const Descriptor& b, int t) const {
@@ -100,11 +139,11 @@ bool MihIndex::meetsInTable(const Descriptor& a, const Descriptor& b, int t) con
 size_t MihIndex::memoryBytes() const {
   size_t bytes = sizeof(*this);
   for (const Table& table : tables_) {
-    bytes += table.dense_buckets.capacity() * sizeof(Bucket);
-    for (const Bucket& b : table.dense_buckets) bytes += b.ids.capacity() * sizeof(FeatureId);
-    for (const auto& kv : table.sparse_buckets) {
-      bytes += sizeof(kv) + 2 * sizeof(void*) + kv.second.ids.capacity() * sizeof(FeatureId);
-    }
+    bytes += sizeof(Table) + table.slots.capacity() * sizeof(Slot) + table.ids.capacity() * sizeof(FeatureId) +
+             table.count.capacity() * sizeof(uint32_t) + table.recent.capacity() * sizeof(Link);
+    // unordered_map nodes: key, value, next pointer and cached hash, plus one bucket pointer each
+    bytes += table.slot_of.size() * (sizeof(uint64_t) + sizeof(uint32_t) + 2 * sizeof(void*)) +
+             table.slot_of.bucket_count() * sizeof(void*);
   }
   return bytes;
 }

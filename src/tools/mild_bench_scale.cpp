@@ -1,0 +1,242 @@
+// mild_bench_scale: query cost of the keyframe database from 1,000 to 100,000 keyframes of 800
+// real ORB features, one thread. Per size, in one run: mild_lcd's MIH with and without early
+// termination, the original MILD (2017) index design, and exact brute force where it finishes in
+// reasonable time; memory per stored feature and insert time. Speed-ups are ratios within the run.
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <optional>
+#include <sstream>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "bench/mild2017_index.hpp"
+#include "bench/synthetic_keyframes.hpp"
+#include "common/image_sequence.hpp"
+#include "common/timing_summary.hpp"
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/feature_extractor.hpp"
+#include "mild_lcd/keyframe_database.hpp"
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+struct Options {
+  std::string sizes = "1000,5000,10000,50000,100000";
+  std::vector<std::string> images;
+  int features = 800;
+  int queries = 30;
+  int brute_queries = 3;
+  size_t brute_max_keyframes = 10000;
+  bool skip_baseline = false;
+  bool json = false;
+};
+
+double msSince(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
+
+std::vector<size_t> parseSizes(const std::string& text) {
+  std::vector<size_t> out;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    try {
+      size_t used = 0;
+      const long v = std::stol(item, &used);
+      if (used != item.size() || v < 1) throw std::invalid_argument(item);
+      out.push_back(static_cast<size_t>(v));
+    } catch (const std::exception&) {
+      throw mild::InvalidInput("--sizes must be a comma-separated list of keyframe counts, got '" + text + "'");
+    }
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+std::vector<std::string> defaultImageDirs() {
+  const fs::path bench = fs::path(MILD_SOURCE_DIR) / ".." / "shared" / "bench";
+  std::vector<std::string> dirs;
+  for (const char* s : {"pub_corridor", "pub_city", "pub_aliasing"}) {
+    if (fs::is_directory(bench / s)) dirs.push_back((bench / s).string());
+  }
+  if (dirs.empty()) dirs.push_back((fs::path(MILD_SOURCE_DIR) / "sample" / "corridor").string());
+  return dirs;
+}
+
+size_t availableMemoryBytes() {
+  return static_cast<size_t>(sysconf(_SC_AVPHYS_PAGES)) * static_cast<size_t>(sysconf(_SC_PAGE_SIZE));
+}
+
+struct Timing {
+  std::vector<double> samples;
+  double median() const { return mild::tools::summarize(samples).median; }
+  double p95() const { return mild::tools::summarize(samples).p95; }
+};
+
+json nullable(std::optional<double> v) { return v ? json(*v) : json(nullptr); }
+
+int run(const Options& opt) {
+  cv::setNumThreads(1);
+  const std::vector<size_t> sizes = parseSizes(opt.sizes);
+  const std::vector<std::string> dirs = opt.images.empty() ? defaultImageDirs() : opt.images;
+
+  mild::OrbParams orb;
+  orb.num_features = opt.features;
+  const mild::OrbExtractor extractor(orb);
+  std::vector<mild::DescriptorList> real;
+  for (const auto& dir : dirs) {
+    for (const auto& path : mild::tools::openImageSequence(dir).frames) {
+      const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+      if (!image.empty()) real.push_back(extractor.extract(image).descriptors);
+    }
+  }
+  const mild::tools::SyntheticKeyframes synthetic(std::move(real), static_cast<size_t>(opt.features));
+  std::vector<mild::DescriptorList> queries;
+  for (int q = 0; q < opt.queries; ++q) queries.push_back(synthetic.query(q));
+  if (!opt.json) {
+    std::printf("%zu real frames from %zu sequence(s); %d features per keyframe; %d queries per size; one thread\n",
+                synthetic.realFrames(), dirs.size(), opt.features, opt.queries);
+  }
+
+  mild::DatabaseParams et_params;  // the defaults: early termination at 20 of the first 64 bits
+  mild::DatabaseParams full_params = et_params;
+  full_params.similarity.early_termination_threshold = 64;  // never rejects early
+
+  json rows = json::array();
+  if (!opt.json) {
+    std::printf("%9s %11s %11s %12s %12s %12s %10s %9s %9s %9s\n", "keyframes", "mih_ms", "mih_et_ms", "mih_et_p95",
+                "mild2017_ms", "brute_ms", "B/feature", "insert_ms", "x2017", "xbrute");
+  }
+  for (size_t n : sizes) {
+    const size_t features = n * static_cast<size_t>(opt.features);
+    // mild_lcd needs ~100 bytes per feature, the 2017 design ~170; they are built one after the other.
+    if (features * 200 > availableMemoryBytes()) {
+      if (!opt.json) std::printf("%9zu skipped: needs about %.1f GB, %.1f GB available\n", n, features * 200 / 1e9,
+                                 availableMemoryBytes() / 1e9);
+      rows.push_back({{"keyframes", n}, {"skipped", "memory"}});
+      continue;
+    }
+    json row = {{"keyframes", n}};
+    Timing mih, mih_et, baseline, brute;
+    mild::QueryStats work;
+    double insert_ms = 0.0, bytes_per_feature = 0.0;
+    {
+      mild::KeyframeDatabase db(et_params);
+      const auto start = Clock::now();
+      for (size_t k = 0; k < n; ++k) db.insert(synthetic.keyframe(k));
+      insert_ms = msSince(start) / static_cast<double>(n);
+      bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
+      for (const auto& q : queries) {
+        auto t = Clock::now();
+        const auto r = db.query(q);
+        mih_et.samples.push_back(msSince(t));
+        work += r.stats;
+      }
+      // Without early termination: the same index, queried with the threshold at 64.
+      db.setSimilarityParams(full_params.similarity);
+      for (const auto& q : queries) {
+        auto t = Clock::now();
+        const auto r = db.query(q);
+        mih.samples.push_back(msSince(t));
+        (void)r;
+      }
+      if (n <= opt.brute_max_keyframes) {
+        for (int q = 0; q < std::min<int>(opt.brute_queries, static_cast<int>(queries.size())); ++q) {
+          auto t = Clock::now();
+          const auto r = db.query(queries[q], mild::kAllKeyframes, mild::SearchMode::kExact);
+          brute.samples.push_back(msSince(t));
+          (void)r;
+        }
+      }
+    }
+    if (!opt.skip_baseline) {
+      mild::tools::Mild2017Index old(et_params);
+      for (size_t k = 0; k < n; ++k) old.insert(synthetic.keyframe(k));
+      for (const auto& q : queries) {
+        auto t = Clock::now();
+        const auto r = old.query(q);
+        baseline.samples.push_back(msSince(t));
+        (void)r;
+      }
+    }
+    const std::optional<double> brute_ms = brute.samples.empty() ? std::nullopt : std::optional<double>(brute.median());
+    const std::optional<double> base_ms = baseline.samples.empty() ? std::nullopt : std::optional<double>(baseline.median());
+    row["mih_ms_median"] = mih.median();
+    row["mih_ms_p95"] = mih.p95();
+    row["mih_et_ms_median"] = mih_et.median();
+    row["mih_et_ms_p95"] = mih_et.p95();
+    row["baseline_2017_ms_median"] = nullable(base_ms);
+    row["baseline_2017_ms_p95"] = base_ms ? json(baseline.p95()) : json(nullptr);
+    row["brute_ms_median"] = nullable(brute_ms);
+    row["bytes_per_feature"] = bytes_per_feature;
+    row["candidates_per_query_feature"] = static_cast<double>(work.candidates_visited) / work.query_features;
+    row["full_distances_per_query_feature"] = static_cast<double>(work.full_distances) / work.query_features;
+    row["votes_per_query_feature"] = static_cast<double>(work.votes) / work.query_features;
+    row["insert_ms_per_keyframe"] = insert_ms;
+    row["speedup_vs_2017"] = base_ms ? json(*base_ms / mih_et.median()) : json(nullptr);
+    row["speedup_vs_brute"] = brute_ms ? json(*brute_ms / mih_et.median()) : json(nullptr);
+    rows.push_back(row);
+    if (!opt.json) {
+      auto cell = [](std::optional<double> v, const char* fmt) {
+        char buf[32];
+        if (!v) return std::string("-");
+        std::snprintf(buf, sizeof(buf), fmt, *v);
+        return std::string(buf);
+      };
+      std::printf("%9zu %11.2f %11.2f %12.2f %12s %12s %10.1f %9.2f %9s %9s\n", n, mih.median(), mih_et.median(),
+                  mih_et.p95(), cell(base_ms, "%.2f").c_str(), cell(brute_ms, "%.1f").c_str(), bytes_per_feature,
+                  insert_ms, cell(base_ms ? std::optional<double>(*base_ms / mih_et.median()) : std::nullopt, "%.1fx").c_str(),
+                  cell(brute_ms ? std::optional<double>(*brute_ms / mih_et.median()) : std::nullopt, "%.0fx").c_str());
+      std::printf("%9s per query feature: %.0f candidates, %.0f full distances, %.1f votes\n", "",
+                  row["candidates_per_query_feature"].get<double>(), row["full_distances_per_query_feature"].get<double>(),
+                  row["votes_per_query_feature"].get<double>());
+      std::fflush(stdout);
+    }
+  }
+  // Growth: t(10k) / t(1k) when both were measured.
+  json out = {{"rows", rows}, {"features_per_keyframe", opt.features}, {"queries", opt.queries}};
+  double t1k = 0, t10k = 0;
+  for (const auto& r : rows) {
+    if (!r.contains("mih_et_ms_median")) continue;
+    if (r["keyframes"] == 1000) t1k = r["mih_et_ms_median"];
+    if (r["keyframes"] == 10000) t10k = r["mih_et_ms_median"];
+  }
+  if (t1k > 0 && t10k > 0) {
+    out["growth_10k_over_1k"] = t10k / t1k;
+    if (!opt.json) std::printf("t(10k) / t(1k) = %.2f\n", t10k / t1k);
+  }
+  if (opt.json) std::cout << out.dump() << "\n";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Query cost of the keyframe database at scale, against the 2017 MILD design and brute force."};
+  Options opt;
+  app.add_option("--sizes", opt.sizes, "keyframe counts, comma-separated")->capture_default_str();
+  app.add_option("--images", opt.images, "sequences of real frames to replicate (default: ../shared/bench, else the sample)");
+  app.add_option("--features", opt.features, "features per keyframe")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--queries", opt.queries, "queries per size")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--brute-queries", opt.brute_queries, "brute-force queries per size")->capture_default_str();
+  app.add_option("--brute-max-keyframes", opt.brute_max_keyframes, "largest size brute force runs at")->capture_default_str();
+  app.add_flag("--skip-baseline", opt.skip_baseline, "do not build the 2017 design");
+  app.add_flag("--json", opt.json, "print one JSON object as the last line");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    return run(opt);
+  } catch (const mild::InvalidInput& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 2;
+  }
+}
