@@ -64,6 +64,9 @@ class KeyframeDatabase {
   // nothing) unless the matrix is N x 32 CV_8U. A keyframe may have no features.
   KeyframeIndex insert(const DescriptorList& descriptors);
   KeyframeIndex insert(const cv::Mat& descriptors);
+  // Many keyframes at once, in order (loading a saved database): the same result as inserting them
+  // one by one, with a single merge of the index at the end.
+  void insertAll(const std::vector<DescriptorList>& keyframes);
 
   // Similarity of the query to every keyframe k < candidate_limit (all keyframes by default).
   // Keyframes at or beyond the limit take no part: they neither receive votes nor count in N or N_f.

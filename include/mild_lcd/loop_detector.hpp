@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -75,6 +76,17 @@ struct KeyframeRecord {
   std::vector<cv::KeyPoint> keypoints;
 };
 
+// Everything a detector has learnt, as plain data: what database_file.hpp saves and loads.
+struct DetectorState {
+  std::string parameters;  // "name: value" lines of the detector that saved it (describeParameters)
+  uint64_t next_id = 0;
+  KeyframeIndex session_start = 0;
+  std::vector<KeyframeRecord> records;     // in database order
+  std::vector<DescriptorList> descriptors; // one list per record, one descriptor per keypoint
+  std::vector<double> posterior;           // the filter's state
+  double no_loop = 1.0;
+};
+
 // The loop-closure pipeline: features -> MIH database (insert and query) -> Bayesian filter ->
 // ranked candidates -> optional geometric verification. Not thread-safe: callers serialise access.
 class LoopDetector {
@@ -95,6 +107,16 @@ class LoopDetector {
                           std::optional<uint64_t> id = std::nullopt);
   // Same, for features computed elsewhere (e.g. by the SLAM front-end).
   DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
+
+  // Replaces everything the detector has learnt by `state` (the index is rebuilt from the
+  // descriptors with this detector's parameters). continue_session = true resumes exactly where the
+  // saved run stopped: the same outputs as if it had never stopped. false starts a new session on
+  // the stored map (e.g. yesterday's): the loaded keyframes are exempt from the temporal exclusion,
+  // since they were not seen a moment ago, and the filter starts from "no loop".
+  // Throws InvalidInput, changing nothing, when the state is inconsistent.
+  void restore(DetectorState state, bool continue_session);
+  // Keyframes [0, sessionStart()) come from an earlier session and are always eligible.
+  KeyframeIndex sessionStart() const { return session_start_; }
 
   size_t size() const { return records_.size(); }
   const KeyframeDatabase& database() const { return database_; }
@@ -120,6 +142,7 @@ class LoopDetector {
   std::vector<KeyframeRecord> records_;
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
   uint64_t next_id_ = 0;
+  KeyframeIndex session_start_ = 0;
 };
 
 }  // namespace mild

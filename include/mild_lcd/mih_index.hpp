@@ -59,6 +59,10 @@ class MihIndex {
   // through the other tables).
   void insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id);
 
+  // While deferred, recent entries are not merged into the contiguous runs (bulk loading: one merge
+  // at the end instead of many); ending the deferral merges every table. Results do not change.
+  void deferMerges(bool defer);
+
   // Calls visit(feature_id, table) for every stored id below id_limit in every live bucket within
   // radius r of q's substrings (in no particular order within a bucket).
   template <class Visit>
@@ -115,6 +119,7 @@ class MihIndex {
   size_t entry_count_ = 0;
   size_t discarded_buckets_ = 0;
   uint64_t features_seen_ = 0;
+  bool merges_deferred_ = false;
 };
 
 template <class Visit>

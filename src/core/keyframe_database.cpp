@@ -123,6 +123,22 @@ int KeyframeDatabase::fullDistance(const Descriptor& q, FeatureId f) const {
          popcount64(q.words[3] ^ tail[2]);
 }
 
+void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
+  size_t total = featureCount();
+  for (const auto& k : keyframes) total += k.size();
+  heads_.reserve(total);
+  tails_.reserve(total);
+  keyframe_offsets_.reserve(keyframe_offsets_.size() + keyframes.size());
+  index_.deferMerges(true);
+  try {
+    for (const auto& k : keyframes) insert(k);
+  } catch (...) {
+    index_.deferMerges(false);
+    throw;
+  }
+  index_.deferMerges(false);
+}
+
 Descriptor KeyframeDatabase::descriptor(FeatureId f) const {
   Descriptor d;
   d.words[0] = heads_[f];

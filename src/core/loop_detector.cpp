@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <string>
 
 #include "mild_lcd/errors.hpp"
@@ -51,6 +52,44 @@ void LoopDetector::reset() {
   records_.clear();
   index_of_id_.clear();
   next_id_ = 0;
+  session_start_ = 0;
+}
+
+void LoopDetector::restore(DetectorState state, bool continue_session) {
+  const size_t n = state.records.size();
+  if (state.descriptors.size() != n) throw InvalidInput("state has " + std::to_string(n) + " keyframes but " +
+                                                       std::to_string(state.descriptors.size()) + " descriptor lists");
+  if (state.session_start > n) throw InvalidInput("state's session start lies beyond its keyframes");
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
+  uint64_t largest_id = 0;
+  for (size_t k = 0; k < n; ++k) {
+    const KeyframeRecord& r = state.records[k];
+    if (r.keypoints.size() != state.descriptors[k].size()) {
+      throw InvalidInput("keyframe " + std::to_string(r.id) + " has " + std::to_string(r.keypoints.size()) +
+                         " keypoints but " + std::to_string(state.descriptors[k].size()) + " descriptors");
+    }
+    if (!std::isfinite(r.stamp)) throw InvalidInput("keyframe " + std::to_string(r.id) + " has a non-finite stamp");
+    if (!index_of_id.emplace(r.id, static_cast<KeyframeIndex>(k)).second) {
+      throw InvalidInput("keyframe id " + std::to_string(r.id) + " appears twice");
+    }
+    largest_id = std::max(largest_id, r.id);
+  }
+  if (n > 0 && state.next_id <= largest_id) throw InvalidInput("state's next id is not above its largest keyframe id");
+
+  KeyframeDatabase database(params_.database);
+  database.insertAll(state.descriptors);
+  LoopFilter filter(params_.filter);
+  if (continue_session) {
+    if (state.posterior.size() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
+    filter.setState(std::move(state.posterior), state.no_loop);
+  }
+  // Nothing can fail from here on.
+  database_ = std::move(database);
+  filter_ = std::move(filter);
+  records_ = std::move(state.records);
+  index_of_id_ = std::move(index_of_id);
+  next_id_ = state.next_id;
+  session_start_ = continue_session ? state.session_start : static_cast<KeyframeIndex>(n);
 }
 
 std::optional<KeyframeIndex> LoopDetector::find(uint64_t id) const {
@@ -74,6 +113,7 @@ KeyframeIndex LoopDetector::eligibleCount(double stamp) const {
   const size_t n = records_.size();
   const size_t frames = static_cast<size_t>(params_.candidates.exclusion_frames);
   size_t limit = frames == 0 ? n : (n + 1 > frames ? n + 1 - frames : 0);
+  if (limit <= session_start_) return session_start_;  // earlier sessions are never "a moment ago"
   if (params_.candidates.exclusion_seconds > 0.0) {
     // Keyframes are stored in arrival order; stamps are expected to grow, so the eligible set is a prefix.
     const double newest_allowed = stamp - params_.candidates.exclusion_seconds;
@@ -81,6 +121,7 @@ KeyframeIndex LoopDetector::eligibleCount(double stamp) const {
     limit = static_cast<size_t>(std::upper_bound(records_.begin(), end, newest_allowed,
                                                  [](double s, const KeyframeRecord& r) { return s < r.stamp; }) -
                                 records_.begin());
+    limit = std::max<size_t>(limit, session_start_);
   }
   return static_cast<KeyframeIndex>(limit);
 }

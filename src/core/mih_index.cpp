@@ -107,7 +107,16 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
       ++table.entries;
       ++entry_count_;
     }
-    if (table.recent.size() > std::max<size_t>(4096, table.ids.size() / 64)) merge(table);
+    if (!merges_deferred_ && table.recent.size() > std::max<size_t>(4096, table.ids.size() / 64)) merge(table);
+  }
+}
+
+void MihIndex::deferMerges(bool defer) {
+  merges_deferred_ = defer;
+  if (!defer) {
+    for (Table& table : tables_) {
+      if (!table.recent.empty()) merge(table);
+    }
   }
 }
 

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <atomic>
 #include <deque>
+#include <filesystem>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -20,7 +21,10 @@
 #include <sensor_msgs/image_encodings.h>
 #include <std_srvs/Trigger.h>
 
+#include "mild_lcd/LoadDatabase.h"
+#include "mild_lcd/SaveDatabase.h"
 #include "mild_lcd/bounded_queue.hpp"
+#include "mild_lcd/database_file.hpp"
 #include "mild_lcd/errors.hpp"
 #include "mild_lcd/loop_detector.hpp"
 #include "mild_lcd/ros/conversions.hpp"
@@ -35,6 +39,9 @@ struct NodeletSettings {
   bool use_keyframe_input = true;
   int queue_size = 100;
   int debug_image_cache = 1000;
+  std::string database_path;
+  bool load_on_start = false;
+  bool save_on_shutdown = false;
 
   static NodeletSettings load(const ros::NodeHandle& pnh) {
     NodeletSettings s;
@@ -42,6 +49,12 @@ struct NodeletSettings {
     pnh.param("use_keyframe_input", s.use_keyframe_input, s.use_keyframe_input);
     pnh.param("queue_size", s.queue_size, s.queue_size);
     pnh.param("debug_image_cache", s.debug_image_cache, s.debug_image_cache);
+    pnh.param("database_path", s.database_path, s.database_path);
+    pnh.param("load_on_start", s.load_on_start, s.load_on_start);
+    pnh.param("save_on_shutdown", s.save_on_shutdown, s.save_on_shutdown);
+    if ((s.load_on_start || s.save_on_shutdown) && s.database_path.empty()) {
+      throw mild::InvalidInput("load_on_start and save_on_shutdown need database_path (the database file)");
+    }
     if (!s.use_image_input && !s.use_keyframe_input) {
       throw mild::InvalidInput("use_image_input and use_keyframe_input are both false: nothing to listen to");
     }
@@ -56,6 +69,14 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   ~LoopClosureNodelet() override {
     if (queue_) queue_->close();
     if (worker_.joinable()) worker_.join();
+    if (detector_ && settings_.save_on_shutdown) {
+      try {
+        mild::saveDetector(*detector_, settings_.database_path);
+        NODELET_INFO("saved %zu keyframes to %s", detector_->size(), settings_.database_path.c_str());
+      } catch (const mild::InvalidInput& e) {
+        NODELET_ERROR("could not save the database on shutdown: %s", e.what());
+      }
+    }
   }
 
  private:
@@ -76,6 +97,19 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       NODELET_FATAL("invalid parameter: %s", e.what());
       throw;  // the loader reports the failure; nothing half-configured keeps running
     }
+    if (settings_.load_on_start) {
+      if (!std::filesystem::exists(settings_.database_path)) {
+        NODELET_WARN("database %s does not exist yet: starting with an empty map", settings_.database_path.c_str());
+      } else {
+        try {  // a map from an earlier run: a new session on it
+          NODELET_INFO("%s", mild::loadDetector(*detector_, settings_.database_path, false).message.c_str());
+        } catch (const mild::InvalidInput& e) {
+          // Starting empty would overwrite the file on shutdown: refuse, so that it can be looked at.
+          NODELET_FATAL("cannot load the database at start-up: %s", e.what());
+          throw;
+        }
+      }
+    }
     const mild::DetectorParams& params = detector_->params();
     match_verifier_ = std::make_unique<mild::GeometricVerifier>(serviceVerificationParams(params.verification));
 
@@ -93,6 +127,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
     match_srv_ = nh.advertiseService("sparse_match", &LoopClosureNodelet::sparseMatchService, this);
     reset_srv_ = nh.advertiseService("reset", &LoopClosureNodelet::resetService, this);
+    save_srv_ = nh.advertiseService("save_database", &LoopClosureNodelet::saveService, this);
+    load_srv_ = nh.advertiseService("load_database", &LoopClosureNodelet::loadService, this);
 
     updater_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     updater_->setHardwareID("mild_lcd");
@@ -265,6 +301,47 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  std::string databasePath(const std::string& requested) const {
+    return requested.empty() ? settings_.database_path : requested;
+  }
+
+  bool saveService(mild_lcd::SaveDatabase::Request& request, mild_lcd::SaveDatabase::Response& response) {
+    const std::string path = databasePath(request.path);
+    if (path.empty()) {
+      response.message = "no path given and no ~database_path set";
+      return true;
+    }
+    std::lock_guard<std::mutex> lock(detector_mutex_);
+    try {
+      mild::saveDetector(*detector_, path);
+      response.success = true;
+      response.message = "saved " + std::to_string(detector_->size()) + " keyframes to " + path;
+      NODELET_INFO("%s", response.message.c_str());
+    } catch (const mild::InvalidInput& e) {
+      response.message = e.what();
+      NODELET_WARN("save_database: %s", e.what());
+    }
+    return true;
+  }
+
+  bool loadService(mild_lcd::LoadDatabase::Request& request, mild_lcd::LoadDatabase::Response& response) {
+    const std::string path = databasePath(request.path);
+    std::lock_guard<std::mutex> lock(detector_mutex_);
+    try {
+      if (path.empty()) throw mild::InvalidInput("no path given and no ~database_path set");
+      response.message = mild::loadDetector(*detector_, path, request.continue_session).message;
+      response.success = true;
+      debug_cache_.clear();
+      debug_order_.clear();
+      NODELET_INFO("%s", response.message.c_str());
+    } catch (const mild::InvalidInput& e) {
+      response.message = e.what();  // the database is as it was
+      NODELET_WARN("load_database: %s", e.what());
+    }
+    response.keyframes = static_cast<uint32_t>(detector_->size());
+    return true;
+  }
+
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     size_t keyframes = 0, features = 0, memory = 0, discarded = 0;
     {
@@ -316,7 +393,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   ros::Subscriber compressed_sub_, keyframe_sub_;
   ros::Publisher loop_pub_;
   image_transport::Publisher debug_pub_;
-  ros::ServiceServer match_srv_, reset_srv_;
+  ros::ServiceServer match_srv_, reset_srv_, save_srv_, load_srv_;
   std::unique_ptr<diagnostic_updater::Updater> updater_;
   ros::WallTimer diagnostics_timer_;
 

@@ -1,0 +1,324 @@
+#include "mild_lcd/database_file.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/parameters.hpp"
+
+namespace mild {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr char kMagic[8] = {'M', 'I', 'L', 'D', 'L', 'C', 'D', '\0'};
+constexpr size_t kHeaderBytes = 32;
+constexpr size_t kKeypointBytes = 6 * 4;
+
+uint32_t crc(uint32_t running, const uint8_t* data, size_t size) {
+  while (size > 0) {  // zlib takes 32-bit lengths
+    const uInt chunk = static_cast<uInt>(std::min<size_t>(size, 1u << 30));
+    running = static_cast<uint32_t>(crc32(running, data, chunk));
+    data += chunk;
+    size -= chunk;
+  }
+  return running;
+}
+
+template <class T>
+void putRaw(std::vector<uint8_t>& out, const T& v) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  const auto* p = reinterpret_cast<const uint8_t*>(&v);
+  out.insert(out.end(), p, p + sizeof(T));
+}
+
+std::string errnoText() { return std::strerror(errno); }
+
+// Buffered writes to a file descriptor, with the payload's CRC kept along the way.
+class PayloadWriter {
+ public:
+  PayloadWriter(int fd, const std::string& path) : fd_(fd), path_(path) { buffer_.reserve(kFlushAt + 4096); }
+
+  template <class T>
+  void put(const T& v) {
+    putRaw(buffer_, v);
+    maybeFlush();
+  }
+  void putBytes(const void* data, size_t size) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    buffer_.insert(buffer_.end(), p, p + size);
+    maybeFlush();
+  }
+  void flush() {
+    crc_ = crc(crc_, buffer_.data(), buffer_.size());
+    size_ += buffer_.size();
+    size_t done = 0;
+    while (done < buffer_.size()) {
+      const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw InvalidInput(path_ + ": cannot write (" + errnoText() + ")");
+      done += static_cast<size_t>(n);
+    }
+    buffer_.clear();
+  }
+  uint64_t size() const { return size_; }
+  uint32_t checksum() const { return crc_; }
+
+ private:
+  static constexpr size_t kFlushAt = 1 << 20;
+  void maybeFlush() {
+    if (buffer_.size() >= kFlushAt) flush();
+  }
+  int fd_;
+  std::string path_;
+  std::vector<uint8_t> buffer_;
+  uint64_t size_ = 0;
+  uint32_t crc_ = static_cast<uint32_t>(crc32(0, nullptr, 0));
+};
+
+void writePayload(const LoopDetector& detector, PayloadWriter& w) {
+  std::string parameters;
+  for (const auto& [name, value] : describeParameters(detector.params())) parameters += name + ": " + value + "\n";
+  w.put(static_cast<uint32_t>(parameters.size()));
+  w.putBytes(parameters.data(), parameters.size());
+  w.put(detector.nextId());
+  w.put(static_cast<uint32_t>(detector.sessionStart()));
+  w.put(static_cast<uint32_t>(detector.size()));
+  for (KeyframeIndex k = 0; k < detector.size(); ++k) {
+    const KeyframeRecord& r = detector.record(k);
+    w.put(r.id);
+    w.put(r.stamp);
+    w.put(static_cast<uint32_t>(r.keypoints.size()));
+    for (const cv::KeyPoint& p : r.keypoints) {
+      w.put(p.pt.x);
+      w.put(p.pt.y);
+      w.put(p.size);
+      w.put(p.angle);
+      w.put(p.response);
+      w.put(static_cast<int32_t>(p.octave));
+    }
+    const DescriptorList descriptors = detector.database().descriptors(k);
+    w.putBytes(descriptors.data(), descriptors.size() * sizeof(Descriptor));
+  }
+  const std::vector<double>& posterior = detector.filter().posterior();
+  w.put(static_cast<uint32_t>(posterior.size()));
+  w.putBytes(posterior.data(), posterior.size() * sizeof(double));
+  w.put(detector.filter().noLoopProbability());
+  w.flush();
+}
+
+// Reads fixed-size values from the payload, refusing to run past its end.
+class Cursor {
+ public:
+  Cursor(const uint8_t* data, size_t size, const std::string& origin) : p_(data), end_(data + size), origin_(origin) {}
+
+  template <class T>
+  T get(const char* what) {
+    need(sizeof(T), what);
+    T v;
+    std::memcpy(&v, p_, sizeof(T));
+    p_ += sizeof(T);
+    return v;
+  }
+  const uint8_t* take(size_t bytes, const char* what) {
+    need(bytes, what);
+    const uint8_t* start = p_;
+    p_ += bytes;
+    return start;
+  }
+  // A count of items of `item_bytes` each that must fit in what is left.
+  size_t count(size_t item_bytes, const char* what) {
+    const uint32_t n = get<uint32_t>(what);
+    if (item_bytes > 0 && n > remaining() / item_bytes) {
+      throw InvalidInput(origin_ + ": corrupt: " + what + " says " + std::to_string(n) + " but only " +
+                         std::to_string(remaining()) + " bytes remain");
+    }
+    return n;
+  }
+  size_t remaining() const { return static_cast<size_t>(end_ - p_); }
+
+ private:
+  void need(size_t bytes, const char* what) const {
+    if (bytes > remaining()) throw InvalidInput(origin_ + ": corrupt: ends inside " + std::string(what));
+  }
+  const uint8_t* p_;
+  const uint8_t* end_;
+  std::string origin_;
+};
+
+std::map<std::string, std::string> parameterLines(const std::string& text) {
+  std::map<std::string, std::string> out;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto colon = line.find(": ");
+    if (colon != std::string::npos) out[line.substr(0, colon)] = line.substr(colon + 2);
+  }
+  return out;
+}
+
+}  // namespace
+
+void saveDetector(const LoopDetector& detector, const std::string& path) {
+  const fs::path target(path);
+  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw InvalidInput(path + ": cannot write a temporary file beside it (" + errnoText() + ")");
+  try {
+    std::vector<uint8_t> header(kHeaderBytes, 0);
+    if (::write(fd, header.data(), header.size()) != static_cast<ssize_t>(header.size())) {
+      throw InvalidInput(path + ": cannot write (" + errnoText() + ")");
+    }
+    PayloadWriter writer(fd, tmp);
+    writePayload(detector, writer);
+
+    header.clear();
+    header.insert(header.end(), kMagic, kMagic + sizeof(kMagic));
+    putRaw(header, kDatabaseFormatVersion);
+    putRaw(header, uint32_t{0});
+    putRaw(header, writer.size());
+    putRaw(header, writer.checksum());
+    putRaw(header, crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), header.data(), header.size()));
+    if (::pwrite(fd, header.data(), header.size(), 0) != static_cast<ssize_t>(header.size()) || ::fsync(fd) != 0) {
+      throw InvalidInput(path + ": cannot write (" + errnoText() + ")");
+    }
+  } catch (...) {
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    throw;
+  }
+  if (::close(fd) != 0) {
+    ::unlink(tmp.c_str());
+    throw InvalidInput(path + ": cannot write (" + errnoText() + ")");
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string why = errnoText();
+    ::unlink(tmp.c_str());
+    throw InvalidInput(path + ": cannot replace the file (" + why + ")");
+  }
+  // The rename itself must reach the disk too.
+  const int dir_fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir_fd >= 0) {
+    ::fsync(dir_fd);
+    ::close(dir_fd);
+  }
+}
+
+DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin) {
+  if (size == 0) throw InvalidInput(origin + ": empty file, not a mild_lcd database");
+  if (size < kHeaderBytes || std::memcmp(data, kMagic, sizeof(kMagic)) != 0) {
+    throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
+  }
+  Cursor header(data, kHeaderBytes, origin);
+  header.take(sizeof(kMagic), "the magic");
+  const uint32_t version = header.get<uint32_t>("the version");
+  const uint32_t flags = header.get<uint32_t>("the flags");
+  const uint64_t payload_size = header.get<uint64_t>("the payload size");
+  const uint32_t payload_crc = header.get<uint32_t>("the payload checksum");
+  const uint32_t header_crc = header.get<uint32_t>("the header checksum");
+  if (crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), data, kHeaderBytes - 4) != header_crc) {
+    throw InvalidInput(origin + ": corrupt header (checksum mismatch)");
+  }
+  if (version != kDatabaseFormatVersion) {
+    throw InvalidInput(origin + ": database format version " + std::to_string(version) + "; this mild_lcd reads version " +
+                       std::to_string(kDatabaseFormatVersion));
+  }
+  if (flags != 0) throw InvalidInput(origin + ": unknown format flags " + std::to_string(flags));
+  if (payload_size != size - kHeaderBytes) {
+    throw InvalidInput(origin + ": truncated or padded: the header announces " + std::to_string(payload_size) +
+                       " bytes of data, the file holds " + std::to_string(size - kHeaderBytes));
+  }
+  const uint8_t* payload = data + kHeaderBytes;
+  if (crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), payload, payload_size) != payload_crc) {
+    throw InvalidInput(origin + ": corrupt data (checksum mismatch)");
+  }
+
+  Cursor in(payload, payload_size, origin);
+  DetectorState state;
+  const size_t text = in.count(1, "the parameters");
+  const uint8_t* chars = in.take(text, "the parameters");
+  state.parameters.assign(reinterpret_cast<const char*>(chars), text);
+  state.next_id = in.get<uint64_t>("the next id");
+  state.session_start = in.get<uint32_t>("the session start");
+  const size_t keyframes = in.count(8 + 8 + 4, "the keyframe count");
+  state.records.resize(keyframes);
+  state.descriptors.resize(keyframes);
+  for (size_t k = 0; k < keyframes; ++k) {
+    KeyframeRecord& r = state.records[k];
+    r.id = in.get<uint64_t>("a keyframe id");
+    r.stamp = in.get<double>("a keyframe stamp");
+    const size_t features = in.count(kKeypointBytes + kDescriptorBytes, "a keyframe's feature count");
+    r.keypoints.resize(features);
+    for (cv::KeyPoint& p : r.keypoints) {
+      p.pt.x = in.get<float>("a keypoint");
+      p.pt.y = in.get<float>("a keypoint");
+      p.size = in.get<float>("a keypoint");
+      p.angle = in.get<float>("a keypoint");
+      p.response = in.get<float>("a keypoint");
+      p.octave = in.get<int32_t>("a keypoint");
+    }
+    state.descriptors[k].resize(features);
+    std::memcpy(state.descriptors[k].data(), in.take(features * kDescriptorBytes, "descriptors"),
+                features * kDescriptorBytes);
+  }
+  const size_t posterior = in.count(sizeof(double), "the filter state size");
+  state.posterior.resize(posterior);
+  std::memcpy(state.posterior.data(), in.take(posterior * sizeof(double), "the filter state"), posterior * sizeof(double));
+  state.no_loop = in.get<double>("the filter state");
+  if (in.remaining() != 0) throw InvalidInput(origin + ": corrupt: " + std::to_string(in.remaining()) + " stray bytes");
+  return state;
+}
+
+DetectorState readDetectorFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InvalidInput(path + ": cannot read the database file");
+  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw InvalidInput(path + ": read error");
+  return parseDetectorState(bytes.data(), bytes.size(), path);
+}
+
+LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session) {
+  const auto start = std::chrono::steady_clock::now();
+  DetectorState state = readDetectorFile(path);
+  LoadReport report;
+  report.keyframes = state.records.size();
+  for (const auto& d : state.descriptors) report.features += d.size();
+
+  // The index is rebuilt with this detector's parameters; say so when the file's differ.
+  const auto saved = parameterLines(state.parameters);
+  std::string differing;
+  for (const auto& [name, value] : describeParameters(detector.params())) {
+    if (name.compare(0, 6, "index/") != 0) continue;
+    auto it = saved.find(name);
+    if (it != saved.end() && it->second != value) {
+      differing += (differing.empty() ? "" : ", ") + name + " " + it->second + " -> " + value;
+    }
+  }
+  try {
+    detector.restore(std::move(state), continue_session);
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(path + ": " + e.what());
+  }
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::ostringstream msg;
+  msg.precision(3);
+  msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << path << " in "
+      << report.seconds << " s" << (continue_session ? ", continuing the saved session" : ", as a new session");
+  if (!differing.empty()) msg << "; index rebuilt with this node's parameters (" << differing << ")";
+  report.message = msg.str();
+  return report;
+}
+
+}  // namespace mild

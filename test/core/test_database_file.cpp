@@ -1,0 +1,258 @@
+#include <gtest/gtest.h>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <opencv2/imgcodecs.hpp>
+#include <zlib.h>
+
+#include <cstring>
+
+#include "mild_lcd/database_file.hpp"
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/loop_detector.hpp"
+
+namespace fs = std::filesystem;
+
+namespace mild {
+namespace {
+
+const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+
+const std::vector<cv::Mat>& fixtureFrames() {
+  static const std::vector<cv::Mat> frames = [] {
+    std::vector<std::string> files;
+    for (const auto& e : fs::directory_iterator(kFixture + "/images")) files.push_back(e.path().string());
+    std::sort(files.begin(), files.end());
+    std::vector<cv::Mat> out;
+    for (const auto& f : files) out.push_back(cv::imread(f, cv::IMREAD_GRAYSCALE));
+    return out;
+  }();
+  return frames;
+}
+
+DetectorParams fixtureParams() {
+  DetectorParams p;
+  p.candidates.exclusion_frames = 8;
+  return p;
+}
+
+void process(LoopDetector& d, size_t first, size_t last, std::vector<DetectionResult>* out = nullptr) {
+  for (size_t i = first; i < last; ++i) {
+    DetectionResult r = d.process(fixtureFrames()[i], PixelFormat::kGray, 0.5 * i);
+    if (out) out->push_back(std::move(r));
+  }
+}
+
+void expectSameResults(const DetectionResult& a, const DetectionResult& b) {
+  EXPECT_EQ(a.query_id, b.query_id);
+  EXPECT_EQ(a.similarity, b.similarity) << "keyframe " << a.query_id;
+  ASSERT_EQ(a.candidates.size(), b.candidates.size()) << "keyframe " << a.query_id;
+  for (size_t c = 0; c < a.candidates.size(); ++c) {
+    EXPECT_EQ(a.candidates[c].id, b.candidates[c].id);
+    EXPECT_EQ(a.candidates[c].probability, b.candidates[c].probability);
+    EXPECT_EQ(a.candidates[c].verification.inliers, b.candidates[c].verification.inliers);
+  }
+}
+
+class DatabaseFile : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("mild_db_test_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+  std::vector<uint8_t> bytes(const std::string& file) const {
+    std::ifstream in(file, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  }
+  void write(const std::string& file, const std::vector<uint8_t>& data) const {
+    std::ofstream(file, std::ios::binary).write(reinterpret_cast<const char*>(data.data()), data.size());
+  }
+  fs::path dir_;
+};
+
+TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {
+  LoopDetector whole(fixtureParams());
+  std::vector<DetectionResult> expected;
+  process(whole, 0, 60, &expected);
+
+  LoopDetector first(fixtureParams());
+  process(first, 0, 35);
+  saveDetector(first, path("map.mild"));
+  LoopDetector resumed(fixtureParams());
+  const LoadReport report = loadDetector(resumed, path("map.mild"), /*continue_session=*/true);
+  EXPECT_EQ(report.keyframes, 35u);
+  EXPECT_EQ(resumed.size(), 35u);
+  EXPECT_EQ(resumed.nextId(), 35u);
+  EXPECT_EQ(resumed.database().index().entryCount(), first.database().index().entryCount());
+  EXPECT_EQ(resumed.filter().posterior(), first.filter().posterior());
+  std::vector<DetectionResult> got;
+  process(resumed, 35, 60, &got);
+  ASSERT_EQ(got.size(), 25u);
+  size_t loops = 0;
+  for (size_t i = 0; i < got.size(); ++i) {
+    expectSameResults(got[i], expected[35 + i]);
+    loops += got[i].candidates.empty() ? 0 : 1;
+  }
+  EXPECT_GT(loops, 0u);
+}
+
+TEST_F(DatabaseFile, ANewSessionOnAStoredMapMatchesItsNewestKeyframesAtOnce) {
+  LoopDetector yesterday(fixtureParams());
+  process(yesterday, 0, 30);
+  saveDetector(yesterday, path("map.mild"));
+
+  // Today the robot starts where yesterday's run ended: keyframe 29's place.
+  LoopDetector today(fixtureParams());
+  loadDetector(today, path("map.mild"), /*continue_session=*/false);
+  EXPECT_EQ(today.sessionStart(), 30u);
+  const DetectionResult r = today.process(fixtureFrames()[29], PixelFormat::kGray, 100.0);
+  EXPECT_EQ(r.query_id, 30u) << "ids continue after the stored ones";
+  ASSERT_EQ(r.stats.eligible_keyframes, 30u) << "stored keyframes are not a moment ago";
+  ASSERT_FALSE(r.similarity.empty());
+  const auto best = std::max_element(r.similarity.begin(), r.similarity.end()) - r.similarity.begin();
+  EXPECT_NEAR(static_cast<double>(best), 29.0, 1.0);
+
+  // Continuing the session instead keeps yesterday's last 8 keyframes out, as an uninterrupted run would.
+  LoopDetector resumed(fixtureParams());
+  loadDetector(resumed, path("map.mild"), /*continue_session=*/true);
+  EXPECT_EQ(resumed.process(fixtureFrames()[29], PixelFormat::kGray, 100.0).stats.eligible_keyframes, 23u);
+}
+
+TEST_F(DatabaseFile, BadFilesAreClearErrorsAndLeaveTheDetectorAsItWas) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 12);
+  saveDetector(source, path("good.mild"));
+  const std::vector<uint8_t> good = bytes(path("good.mild"));
+  ASSERT_GT(good.size(), 1000u);
+
+  LoopDetector running(fixtureParams());
+  process(running, 20, 30);
+  const size_t size_before = running.size();
+  const uint64_t next_before = running.nextId();
+
+  auto expectRejected = [&](const std::vector<uint8_t>& data, const std::string& words) {
+    write(path("bad.mild"), data);
+    try {
+      loadDetector(running, path("bad.mild"), true);
+      ADD_FAILURE() << "accepted a bad file (" << words << ")";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find(path("bad.mild")), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(running.size(), size_before);
+    EXPECT_EQ(running.nextId(), next_before);
+  };
+  expectRejected({}, "empty");
+  expectRejected(std::vector<uint8_t>(good.begin(), good.begin() + 20), "not a mild_lcd database");
+  for (size_t cut : {size_t{32}, size_t{100}, good.size() / 2, good.size() - 1}) {
+    expectRejected(std::vector<uint8_t>(good.begin(), good.begin() + static_cast<long>(cut)), "truncated");
+  }
+  std::vector<uint8_t> flipped = good;
+  flipped[good.size() / 3] ^= 0x10;
+  expectRejected(flipped, "checksum");
+  std::vector<uint8_t> magic = good;
+  magic[0] = 'X';
+  expectRejected(magic, "not a mild_lcd database");
+  std::vector<uint8_t> header = good;
+  header[9] ^= 1;  // the version, without fixing the header checksum
+  expectRejected(header, "corrupt header");
+  expectRejected(std::vector<uint8_t>(5000, 0xAB), "not a mild_lcd database");
+  EXPECT_THROW(loadDetector(running, path("missing.mild"), true), InvalidInput);
+
+  // The running detector still works and still owns its keyframes.
+  EXPECT_EQ(running.process(fixtureFrames()[31], PixelFormat::kGray, 15.5).query_id, next_before);
+}
+
+TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 3);
+  saveDetector(source, path("map.mild"));
+  std::vector<uint8_t> data = bytes(path("map.mild"));
+  data[8] = 2;  // format version 2, with a header checksum that matches it
+  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
+  std::memcpy(data.data() + 28, &header_crc, 4);
+  write(path("v2.mild"), data);
+  try {
+    readDetectorFile(path("v2.mild"));
+    FAIL() << "read a version-2 file";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("format version 2; this mild_lcd reads version 1"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(DatabaseFile, OtherIndexParametersRebuildTheIndexAndSaySo) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 20);
+  saveDetector(source, path("map.mild"));
+  DetectorParams other = fixtureParams();
+  other.database.index.num_tables = 22;
+  LoopDetector loaded(other);
+  const LoadReport report = loadDetector(loaded, path("map.mild"), true);
+  EXPECT_NE(report.message.find("index/num_tables 16 -> 22"), std::string::npos) << report.message;
+  // The same as building the 22-table detector from the same features.
+  LoopDetector fresh(other);
+  process(fresh, 0, 20);
+  EXPECT_EQ(loaded.database().index().entryCount(), fresh.database().index().entryCount());
+  EXPECT_EQ(loaded.process(fixtureFrames()[50], PixelFormat::kGray, 25.0).similarity,
+            fresh.process(fixtureFrames()[50], PixelFormat::kGray, 25.0).similarity);
+}
+
+TEST_F(DatabaseFile, SavingIntoAMissingFolderFailsAndKeepsNothingHalfWritten) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 3);
+  EXPECT_THROW(saveDetector(source, path("no/such/folder/map.mild")), InvalidInput);
+  saveDetector(source, path("map.mild"));
+  size_t files = 0;
+  for (const auto& e : fs::directory_iterator(dir_)) files += e.is_regular_file() ? 1 : 0;
+  EXPECT_EQ(files, 1u) << "no temporary file left behind";
+}
+
+// A process killed (SIGKILL) at any moment of a save leaves the previous file complete and
+// loadable, or the new one: never a mix, never a torn file.
+TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
+  LoopDetector small(fixtureParams()), large(fixtureParams());
+  process(small, 0, 5);
+  process(large, 0, 60);
+  const std::string target = path("map.mild");
+  saveDetector(small, target);
+
+  std::mt19937 rng(11);
+  size_t saw_small = 0, saw_large = 0;
+  for (int attempt = 0; attempt < 25; ++attempt) {
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      for (;;) {
+        saveDetector(large, target);
+        saveDetector(small, target);
+      }
+    }
+    usleep(std::uniform_int_distribution<int>(0, 40000)(rng));
+    kill(child, SIGKILL);
+    waitpid(child, nullptr, 0);
+    const DetectorState state = readDetectorFile(target);  // throws if torn
+    ASSERT_TRUE(state.records.size() == 5 || state.records.size() == 60) << state.records.size();
+    (state.records.size() == 5 ? saw_small : saw_large)++;
+    LoopDetector check(fixtureParams());
+    EXPECT_NO_THROW(loadDetector(check, target, true));
+  }
+  for (const auto& e : fs::directory_iterator(dir_)) {
+    if (e.path().string().find(".tmp.") != std::string::npos) fs::remove(e.path());  // a killed writer's leftovers
+  }
+  EXPECT_GT(saw_small, 0u);
+  EXPECT_GT(saw_large, 0u);
+}
+
+}  // namespace
+}  // namespace mild
