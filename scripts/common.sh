@@ -2,7 +2,7 @@
 # Sourced, not executed. Honours BUILD_DIR, BUILD_TYPE, JOBS and MILD_CMAKE_ARGS.
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # Not "build/": rosrun ignores executables under <package>/build/, and the repository root is the package.
-BUILD_DIR="${BUILD_DIR:-$REPO/.build}"
+export BUILD_DIR="${BUILD_DIR:-$REPO/.build}"
 BUILD_TYPE="${BUILD_TYPE:-RelWithDebInfo}"
 JOBS="${JOBS:-$(nproc)}"
 export ROS_HOME="$BUILD_DIR/ros_home"

@@ -1,10 +1,19 @@
 #!/bin/bash
-# Installs missing Debian packages, builds mild_lcd in build/, runs every gtest and rostest and
-# prints `N passed, N failed` as its last line. Exits non-zero when anything failed or did not build.
-#   ./scripts/test.sh                       # everything
-#   BUILD_DIR=build-asan MILD_CMAKE_ARGS=-DMILD_SANITIZE=address,undefined ./scripts/test.sh
+# Installs missing Debian packages, builds mild_lcd in .build/, runs every gtest and rostest, then
+# each libFuzzer target for FUZZ_SECONDS (30), and prints `N passed, N failed` as its last line.
+# Exits non-zero when anything failed or did not build.
+#   ./scripts/test.sh                                   # everything
+#   MILD_SANITIZE=address,undefined ./scripts/test.sh   # everything under ASan + UBSan (.build-address-undefined/)
+#   MILD_SANITIZE=thread ./scripts/test.sh              # the gtests under ThreadSanitizer (.build-thread/)
+#   FUZZ_SECONDS=0 ./scripts/test.sh                    # without the fuzzers
 set -eo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+if [[ -n "${MILD_SANITIZE:-}" ]]; then
+  BUILD_DIR="${BUILD_DIR:-$HERE/../.build-${MILD_SANITIZE//,/-}}"
+  MILD_CMAKE_ARGS="${MILD_CMAKE_ARGS:-} -DMILD_SANITIZE=$MILD_SANITIZE"
+  FUZZ_SECONDS="${FUZZ_SECONDS:-0}"  # the fuzzers carry their own sanitizers
+fi
+source "$HERE/common.sh"
 
 fail() {
   echo "$1" >&2
@@ -17,8 +26,30 @@ mild_configure_and_build || fail "[mild_lcd] build failed"
 cmake --build "$BUILD_DIR" -j "$JOBS" --target tests || fail "[mild_lcd] test build failed"
 
 rm -rf "$BUILD_DIR/test_results"
-# run_tests exits 0 even when tests fail (ros-recipe gotcha 6): the verdict comes from the results.
-cmake --build "$BUILD_DIR" --target run_tests -j 1 || true
+case "${MILD_SANITIZE:-}" in
+  *address*)
+    # The nodelet library is instrumented but the nodelet manager and Python are not: the ASan
+    # runtime has to be loaded first into every process the tests start.
+    export LD_PRELOAD="$(gcc -print-file-name=libasan.so)"
+    export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1:strict_string_checks=1"
+    export LSAN_OPTIONS="suppressions=$REPO/test/sanitizers/lsan.supp:print_suppressions=0"
+    export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+    ;;
+esac
+if [[ "${MILD_SANITIZE:-}" == *thread* ]]; then
+  # ThreadSanitizer cannot be preloaded into the uninstrumented nodelet manager: the gtests only
+  # (the worker queue's concurrency tests are among them).
+  export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1"
+  cmake --build "$BUILD_DIR" --target run_tests_mild_lcd_gtest -j 1 || true
+else
+  # run_tests exits 0 even when tests fail (ros-recipe gotcha 6): the verdict comes from the results.
+  cmake --build "$BUILD_DIR" --target run_tests -j 1 || true
+fi
+unset LD_PRELOAD
+
+if [[ "${FUZZ_SECONDS:-30}" -gt 0 ]]; then
+  FUZZ_SECONDS="${FUZZ_SECONDS:-30}" "$REPO/scripts/fuzz.sh" || echo "[mild_lcd] a fuzz target failed" >&2
+fi
 
 verdict=0
 catkin_test_results "$BUILD_DIR/test_results" >"$BUILD_DIR/catkin_test_results.txt" 2>&1 || verdict=$?

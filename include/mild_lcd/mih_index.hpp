@@ -59,8 +59,9 @@ class MihIndex {
   // through the other tables).
   void insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id);
 
-  // While deferred, recent entries are not merged into the contiguous runs (bulk loading: one merge
-  // at the end instead of many); ending the deferral merges every table. Results do not change.
+  // Bulk loading: while deferred, recent entries are merged into the contiguous runs rarely (each
+  // entry is copied a few times, not ~64), and ending the deferral merges every table. Queries and
+  // results are the same either way.
   void deferMerges(bool defer);
 
   // Calls visit(feature_id, table) for every stored id below id_limit in every live bucket within
@@ -87,20 +88,22 @@ class MihIndex {
 
   struct Link {
     FeatureId id;
-    uint32_t next;
+    uint32_t next;  // older link of the same bucket, or kNone
+    uint32_t slot;  // its bucket, so that merging needs no walk along the chains
   };
-  // What a probe reads of a bucket, in one place: its settled run starts at `offset` and ends where
-  // the next slot's starts; `recent` is its newest recent link, kNone, or kDiscarded.
+  // A bucket, in one place: its settled run starts at `offset` and ends where the next slot's
+  // starts; `recent` is its newest recent link, kNone, or kDiscarded; `count` its entries, settled
+  // and recent (for the cap).
   struct Slot {
     uint32_t offset;
     uint32_t recent;
+    uint32_t count;
   };
   struct Table {
     bool dense = true;
     std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
     std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
     std::vector<FeatureId> ids;                      // settled entries, bucket after bucket
-    std::vector<uint32_t> count;                     // entries per bucket, settled and recent
     std::vector<Link> recent;
     size_t entries = 0;
 
@@ -110,6 +113,8 @@ class MihIndex {
 
   size_t bucketCap(int t) const;
   void merge(Table& table);
+  size_t slotCount(const Table& table) const { return table.slots.size() - 1; }
+  static size_t mergeThreshold(const Table& table);
 
   MihParams params_;
   SubstringLayout layout_;
@@ -120,6 +125,16 @@ class MihIndex {
   size_t discarded_buckets_ = 0;
   uint64_t features_seen_ = 0;
   bool merges_deferred_ = false;
+  // Substrings the keyframe being inserted already put into the table at hand: a small open-
+  // addressing set, emptied by bumping the generation instead of clearing it.
+  struct Seen {
+    uint64_t key = 0;
+    uint32_t generation = 0;
+  };
+  std::vector<Seen> seen_;
+  std::vector<uint64_t> keys_;  // the keyframe's substrings for the table at hand
+  uint32_t seen_generation_ = 0;
+  bool firstInKeyframe(uint64_t key);
 };
 
 template <class Visit>

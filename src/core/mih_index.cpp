@@ -36,6 +36,12 @@ void MihParams::validate() const {
   if (min_bucket_cap < 1) throw InvalidInput("index/min_bucket_cap must be at least 1");
 }
 
+size_t MihIndex::mergeThreshold(const Table& table) {
+  // Recent entries cost a dependent load each at query time; 1/64 of the settled ones keeps them
+  // rare while each entry is copied about 64 times over its life (a memmove, cheap).
+  return std::max<size_t>(4096, table.ids.size() / 64);
+}
+
 uint32_t MihIndex::Table::find(uint64_t key) const {
   if (dense) return static_cast<uint32_t>(key);
   auto it = slot_of.find(key);
@@ -44,11 +50,8 @@ uint32_t MihIndex::Table::find(uint64_t key) const {
 
 uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
   if (dense) return static_cast<uint32_t>(key);
-  auto [it, added] = slot_of.emplace(key, static_cast<uint32_t>(count.size()));
-  if (added) {  // a new, empty bucket before the end sentinel
-    slots.insert(slots.end() - 1, Slot{slots.back().offset, kNone});
-    count.push_back(0);
-  }
+  auto [it, added] = slot_of.emplace(key, static_cast<uint32_t>(slots.size() - 1));
+  if (added) slots.insert(slots.end() - 1, Slot{slots.back().offset, kNone, 0});  // before the end sentinel
   return it->second;
 }
 
@@ -67,8 +70,7 @@ void MihIndex::clear() {
     Table& table = tables_[t];
     table.dense = layout_.length(t) <= kMaxDenseBits;
     const size_t slots = table.dense ? size_t{1} << layout_.length(t) : 0;
-    table.slots.assign(slots + 1, Slot{0, kNone});
-    table.count.assign(slots, 0);
+    table.slots.assign(slots + 1, Slot{0, kNone, 0});
   }
   entry_count_ = 0;
   discarded_buckets_ = 0;
@@ -81,33 +83,60 @@ size_t MihIndex::bucketCap(int t) const {
   return std::max<size_t>(params_.min_bucket_cap, static_cast<size_t>(params_.bucket_cap_factor * average));
 }
 
+bool MihIndex::firstInKeyframe(uint64_t key) {
+  const size_t mask = seen_.size() - 1;
+  for (size_t h = (key * 0x9E3779B97F4A7C15ull) >> 40 & mask;; h = (h + 1) & mask) {
+    Seen& s = seen_[h];
+    if (s.generation != seen_generation_) {
+      s = {key, seen_generation_};
+      return true;
+    }
+    if (s.key == key) return false;
+  }
+}
+
 void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id) {
   features_seen_ += count;
+  size_t capacity = 1024;
+  while (capacity < 2 * count) capacity *= 2;  // at most half full: short probe sequences
+  if (seen_.size() < capacity) seen_.assign(capacity, Seen{});
   for (int t = 0; t < layout_.count(); ++t) {
     Table& table = tables_[t];
     const size_t cap = bucketCap(t);
+    if (++seen_generation_ == 0) {  // wrapped: old stamps could look current
+      std::fill(seen_.begin(), seen_.end(), Seen{});
+      seen_generation_ = 1;
+    }
+    keys_.resize(count);
+    for (size_t i = 0; i < count; ++i) keys_[i] = layout_.key(descriptors[i], t);
+    constexpr size_t kAhead = 8;  // buckets are scattered: request them a few features ahead
     for (size_t i = 0; i < count; ++i) {
-      const uint32_t slot = table.findOrAdd(layout_.key(descriptors[i], t));
-      uint32_t& head = table.slots[slot].recent;
-      if (head == kDiscarded) continue;
-      if (head != kNone && table.recent[head].id >= first_id) continue;  // this keyframe is already here
-      uint32_t& entries = table.count[slot];
-      if (params_.cap_buckets && entries >= cap) {
+      if (table.dense && i + kAhead < count) __builtin_prefetch(&table.slots[keys_[i + kAhead]]);
+      const uint64_t key = keys_[i];
+      // Intra-image burstiness: the keyframe's first feature in a bucket is its only entry there.
+      if (!firstInKeyframe(key)) continue;
+      const uint32_t s = table.findOrAdd(key);
+      Slot& slot = table.slots[s];
+      if (slot.recent == kDiscarded) continue;
+      if (params_.cap_buckets && slot.count >= cap) {
         // Discarded: ignored from now on; its entries leave memory at the next merge.
-        entry_count_ -= entries;
-        table.entries -= entries;
-        entries = 0;
-        head = kDiscarded;
+        entry_count_ -= slot.count;
+        table.entries -= slot.count;
+        slot.count = 0;
+        slot.recent = kDiscarded;
         ++discarded_buckets_;
         continue;
       }
-      table.recent.push_back({first_id + static_cast<FeatureId>(i), head});
-      head = static_cast<uint32_t>(table.recent.size() - 1);
-      ++entries;
+      table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s});
+      slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
+      ++slot.count;
       ++table.entries;
       ++entry_count_;
     }
-    if (!merges_deferred_ && table.recent.size() > std::max<size_t>(4096, table.ids.size() / 64)) merge(table);
+    // Bulk loading merges rarely (each entry is copied a few times instead of ~64), live insertion
+    // often (recent entries are slower to probe).
+    const size_t threshold = merges_deferred_ ? std::max<size_t>(1 << 16, table.ids.size() / 4) : mergeThreshold(table);
+    if (table.recent.size() > threshold) merge(table);
   }
 }
 
@@ -121,24 +150,44 @@ void MihIndex::deferMerges(bool defer) {
 }
 
 void MihIndex::merge(Table& table) {
-  const size_t slots = table.count.size();
-  std::vector<FeatureId> ids;
-  ids.reserve(table.entries);
-  std::vector<FeatureId> chain;
-  for (size_t s = 0; s < slots; ++s) {
-    Slot& slot = table.slots[s];
-    const uint32_t begin = slot.offset, end = table.slots[s + 1].offset;
-    slot.offset = static_cast<uint32_t>(ids.size());
-    if (slot.recent == kDiscarded) continue;
-    ids.insert(ids.end(), table.ids.begin() + begin, table.ids.begin() + end);
-    chain.clear();
-    for (uint32_t link = slot.recent; link != kNone; link = table.recent[link].next) chain.push_back(table.recent[link].id);
-    ids.insert(ids.end(), chain.rbegin(), chain.rend());  // oldest first: ids keep ascending
-    slot.recent = kNone;
+  // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
+  // ids, so scattering them in that order keeps every bucket's ids ascending.
+  const size_t slots = slotCount(table);
+  std::vector<uint32_t> start(slots + 1, 0);
+  for (const Link& link : table.recent) {
+    if (table.slots[link.slot].recent != kDiscarded) ++start[link.slot + 1];
   }
-  table.slots[slots].offset = static_cast<uint32_t>(ids.size());
+  for (size_t s = 0; s < slots; ++s) {
+    const Slot& slot = table.slots[s];
+    const uint32_t settled = slot.recent == kDiscarded ? 0 : table.slots[s + 1].offset - slot.offset;
+    start[s + 1] += start[s] + settled;
+  }
+  std::vector<FeatureId> ids(start[slots]);
+  for (size_t s = 0; s < slots; ++s) {  // settled runs first, then room for the recent ones
+    Slot& slot = table.slots[s];
+    if (slot.recent != kDiscarded) {
+      const FeatureId* run = table.ids.data() + slot.offset;
+      const uint32_t settled = table.slots[s + 1].offset - slot.offset;
+      std::copy(run, run + settled, ids.begin() + start[s]);
+      slot.offset = start[s] + settled;  // the write cursor for its recent entries, for now
+    } else {
+      slot.offset = start[s];
+    }
+  }
+  for (const Link& link : table.recent) {
+    Slot& slot = table.slots[link.slot];
+    if (slot.recent != kDiscarded) ids[slot.offset++] = link.id;
+  }
+  for (size_t s = 0; s < slots; ++s) {
+    table.slots[s].offset = start[s];
+    if (table.slots[s].recent != kDiscarded) table.slots[s].recent = kNone;
+  }
+  table.slots[slots].offset = start[slots];
   table.ids = std::move(ids);
   table.recent.clear();
+  if (table.recent.capacity() > 2 * mergeThreshold(table)) {  // after a bulk load: give the room back
+    std::vector<Link>().swap(table.recent);
+  }
 }
 
 bool MihIndex::meetsInTable(const Descriptor& a, const Descriptor& b, int t) const {
@@ -149,7 +198,7 @@ size_t MihIndex::memoryBytes() const {
   size_t bytes = sizeof(*this);
   for (const Table& table : tables_) {
     bytes += sizeof(Table) + table.slots.capacity() * sizeof(Slot) + table.ids.capacity() * sizeof(FeatureId) +
-             table.count.capacity() * sizeof(uint32_t) + table.recent.capacity() * sizeof(Link);
+             table.recent.capacity() * sizeof(Link);
     // unordered_map nodes: key, value, next pointer and cached hash, plus one bucket pointer each
     bytes += table.slot_of.size() * (sizeof(uint64_t) + sizeof(uint32_t) + 2 * sizeof(void*)) +
              table.slot_of.bucket_count() * sizeof(void*);

@@ -22,6 +22,7 @@
 #include "bench/synthetic_keyframes.hpp"
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
+#include "mild_lcd/database_file.hpp"
 #include "mild_lcd/errors.hpp"
 #include "mild_lcd/feature_extractor.hpp"
 #include "mild_lcd/keyframe_database.hpp"
@@ -40,6 +41,7 @@ struct Options {
   int brute_queries = 3;
   size_t brute_max_keyframes = 10000;
   bool skip_baseline = false;
+  size_t persistence_keyframes = 5000;
   bool json = false;
 };
 
@@ -84,6 +86,35 @@ struct Timing {
 };
 
 json nullable(std::optional<double> v) { return v ? json(*v) : json(nullptr); }
+
+// Save and load times of a detector holding n synthetic keyframes (with keypoints, as a real one).
+json measurePersistence(const mild::tools::SyntheticKeyframes& synthetic, size_t n) {
+  mild::DetectorState state;
+  state.next_id = n;
+  for (size_t k = 0; k < n; ++k) {
+    state.descriptors.push_back(synthetic.keyframe(k));
+    mild::KeyframeRecord record{k, 0.1 * static_cast<double>(k), {}};
+    for (size_t i = 0; i < state.descriptors.back().size(); ++i) {
+      record.keypoints.emplace_back(static_cast<float>(i % 320), static_cast<float>(i / 320), 31.0f, 90.0f, 1e-3f, 0);
+    }
+    state.records.push_back(std::move(record));
+  }
+  mild::DetectorParams params;
+  params.verification.enabled = false;
+  mild::LoopDetector detector(params);
+  detector.restore(std::move(state), true);
+  const fs::path file = fs::temp_directory_path() / ("mild_bench_scale_" + std::to_string(::getpid()) + ".mild");
+  auto t = Clock::now();
+  mild::saveDetector(detector, file.string());
+  const double save_s = msSince(t) / 1000.0;
+  mild::LoopDetector loaded(params);
+  t = Clock::now();
+  const mild::LoadReport report = mild::loadDetector(loaded, file.string(), true);
+  const double load_s = msSince(t) / 1000.0;
+  const double file_mb = static_cast<double>(fs::file_size(file)) / 1e6;
+  fs::remove(file);
+  return {{"keyframes", n}, {"features", report.features}, {"file_mb", file_mb}, {"save_s", save_s}, {"load_s", load_s}};
+}
 
 int run(const Options& opt) {
   cv::setNumThreads(1);
@@ -205,6 +236,15 @@ int run(const Options& opt) {
   }
   // Growth: t(10k) / t(1k) when both were measured.
   json out = {{"rows", rows}, {"features_per_keyframe", opt.features}, {"queries", opt.queries}};
+  if (opt.persistence_keyframes > 0) {
+    out["persistence"] = measurePersistence(synthetic, opt.persistence_keyframes);
+    if (!opt.json) {
+      const json& p = out["persistence"];
+      std::printf("database file, %zu keyframes x %d features: %.0f MB, save %.2f s, load %.2f s (index rebuilt)\n",
+                  opt.persistence_keyframes, opt.features, p["file_mb"].get<double>(), p["save_s"].get<double>(),
+                  p["load_s"].get<double>());
+    }
+  }
   double t1k = 0, t10k = 0;
   for (const auto& r : rows) {
     if (!r.contains("mih_et_ms_median")) continue;
@@ -231,6 +271,8 @@ int main(int argc, char** argv) {
   app.add_option("--brute-queries", opt.brute_queries, "brute-force queries per size")->capture_default_str();
   app.add_option("--brute-max-keyframes", opt.brute_max_keyframes, "largest size brute force runs at")->capture_default_str();
   app.add_flag("--skip-baseline", opt.skip_baseline, "do not build the 2017 design");
+  app.add_option("--persistence-keyframes", opt.persistence_keyframes,
+                 "time saving and loading a database of this many keyframes (0: skip)")->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
   CLI11_PARSE(app, argc, argv);
   try {

@@ -1,0 +1,65 @@
+// libFuzzer target: Keyframe and Image messages as the nodelet receives them, converted for the
+// core and processed. Messages are built field by field from the input (FuzzedDataProvider), so
+// the fuzzer explores what a publisher can send, not roscpp's own wire decoder.
+#include <fuzzer/FuzzedDataProvider.h>
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/ros/conversions.hpp"
+
+namespace {
+
+mild::LoopDetector& detector() {
+  static mild::LoopDetector d = [] {
+    mild::DetectorParams p;
+    p.database.index.expected_features = 10000;
+    p.candidates.exclusion_frames = 2;
+    return mild::LoopDetector(p);
+  }();
+  return d;
+}
+
+mild_lcd::KeyPoint keypoint(FuzzedDataProvider& in) {
+  mild_lcd::KeyPoint k;
+  k.x = in.ConsumeFloatingPoint<float>();
+  k.y = in.ConsumeFloatingPoint<float>();
+  k.size = in.ConsumeFloatingPoint<float>();
+  k.angle = in.ConsumeFloatingPoint<float>();
+  k.response = in.ConsumeFloatingPoint<float>();
+  k.octave = in.ConsumeIntegral<int32_t>();
+  return k;
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  FuzzedDataProvider in(data, size);
+  try {
+    if (in.ConsumeBool()) {
+      mild_lcd::Keyframe msg;
+      msg.has_id = in.ConsumeBool();
+      msg.id = in.ConsumeIntegral<uint64_t>();
+      msg.header.stamp.sec = in.ConsumeIntegral<uint32_t>();
+      const size_t n = in.ConsumeIntegralInRange<size_t>(0, 64);
+      for (size_t i = 0; i < n; ++i) msg.keypoints.push_back(keypoint(in));
+      msg.descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 64 * 33));
+      const mild::Features f = mild_lcd::featuresFromMsg(msg);
+      std::optional<uint64_t> id;
+      if (msg.has_id) id = msg.id;
+      detector().process(f, msg.header.stamp.toSec(), id);
+    } else {
+      sensor_msgs::Image msg;
+      msg.encoding = in.PickValueInArray<std::string>({"mono8", "bgr8", "rgb8", "bgra8", "rgba8", "mono16", "16UC1",
+                                                       "32FC1", "8UC1", "yuv422", ""});
+      msg.width = in.ConsumeIntegralInRange<uint32_t>(0, 96);
+      msg.height = in.ConsumeIntegralInRange<uint32_t>(0, 96);
+      msg.step = in.ConsumeIntegralInRange<uint32_t>(0, 400);
+      msg.is_bigendian = in.ConsumeBool();
+      msg.data = in.ConsumeRemainingBytes<uint8_t>();
+      const mild_lcd::DecodedImage image = mild_lcd::imageFromMsg(msg);
+      detector().process(image.image, image.format, 0.0);
+    }
+  } catch (const mild::InvalidInput&) {
+  }
+  return 0;
+}
