@@ -24,6 +24,12 @@ struct MihParams {
   double bucket_cap_factor = 50.0;
   uint64_t expected_features = 1000000;
   uint32_t min_bucket_cap = 64;
+  // Bounded query time as the map grows (0 = off, the default): a bucket keeps only its newest
+  // max_bucket_entries entries, older ones give way as new ones arrive, so a probe never reads more
+  // than about this many ids per bucket however large the map. Common substrings then reach back a
+  // bounded number of keyframes, distinctive (rare) ones to the start of the map. Measured in the
+  // README ("Beyond linear growth").
+  uint32_t max_bucket_entries = 0;
 
   // Throws InvalidInput naming the first invalid field.
   void validate() const;
@@ -79,6 +85,7 @@ class MihIndex {
 
   size_t entryCount() const { return entry_count_; }
   size_t discardedBuckets() const { return discarded_buckets_; }
+  uint64_t evictedEntries() const { return evicted_entries_; }
   size_t memoryBytes() const;
   void clear();
 
@@ -123,6 +130,7 @@ class MihIndex {
   std::vector<std::vector<uint64_t>> probe_masks_;
   size_t entry_count_ = 0;
   size_t discarded_buckets_ = 0;
+  uint64_t evicted_entries_ = 0;
   uint64_t features_seen_ = 0;
   bool merges_deferred_ = false;
   // Substrings the keyframe being inserted already put into the table at hand: a small open-

@@ -85,6 +85,7 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
   visit("index/bucket_cap_factor", p.database.index.bucket_cap_factor);
   visit("index/expected_features", p.database.index.expected_features);
   visit("index/min_bucket_cap", p.database.index.min_bucket_cap);
+  visit("index/max_bucket_entries", p.database.index.max_bucket_entries);
 
   visit("similarity/max_distance", p.database.similarity.max_distance);
   visit("similarity/sigma2", p.database.similarity.sigma2);

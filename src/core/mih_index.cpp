@@ -34,6 +34,7 @@ void MihParams::validate() const {
     throw InvalidInput("index/bucket_cap_factor must be a positive number, got " + std::to_string(bucket_cap_factor));
   }
   if (min_bucket_cap < 1) throw InvalidInput("index/min_bucket_cap must be at least 1");
+  if (max_bucket_entries == 1) throw InvalidInput("index/max_bucket_entries must be 0 (off) or at least 2");
 }
 
 size_t MihIndex::mergeThreshold(const Table& table) {
@@ -129,6 +130,12 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
       }
       table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s});
       slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
+      if (params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries &&
+          slot.offset < table.slots[s + 1].offset) {
+        ++slot.offset;  // the oldest settled entry gives way (the merge drops recent ones over the bound)
+        ++evicted_entries_;
+        continue;
+      }
       ++slot.count;
       ++table.entries;
       ++entry_count_;
@@ -153,14 +160,28 @@ void MihIndex::merge(Table& table) {
   // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
   // ids, so scattering them in that order keeps every bucket's ids ascending.
   const size_t slots = slotCount(table);
-  std::vector<uint32_t> start(slots + 1, 0);
+  const uint32_t bound = params_.max_bucket_entries;
+  std::vector<uint32_t> start(slots + 1, 0), recent_in(slots, 0);
   for (const Link& link : table.recent) {
-    if (table.slots[link.slot].recent != kDiscarded) ++start[link.slot + 1];
+    if (table.slots[link.slot].recent != kDiscarded) ++recent_in[link.slot];
   }
+  // Over the bound (max_bucket_entries), a bucket's oldest entries go: settled ones first.
+  std::vector<uint32_t> skip_recent(bound > 0 ? slots : 0, 0);
   for (size_t s = 0; s < slots; ++s) {
-    const Slot& slot = table.slots[s];
-    const uint32_t settled = slot.recent == kDiscarded ? 0 : table.slots[s + 1].offset - slot.offset;
-    start[s + 1] += start[s] + settled;
+    Slot& slot = table.slots[s];
+    uint32_t settled = slot.recent == kDiscarded ? 0 : table.slots[s + 1].offset - slot.offset;
+    if (bound > 0 && settled + recent_in[s] > bound) {
+      uint32_t excess = settled + recent_in[s] - bound;
+      const uint32_t from_settled = std::min(excess, settled);
+      slot.offset += from_settled;
+      settled -= from_settled;
+      excess -= from_settled;
+      skip_recent[s] = excess;
+      evicted_entries_ += from_settled + excess;
+      table.entries -= from_settled + excess;
+      entry_count_ -= from_settled + excess;
+    }
+    start[s + 1] = start[s] + settled + recent_in[s] - (bound > 0 ? skip_recent[s] : 0);
   }
   std::vector<FeatureId> ids(start[slots]);
   for (size_t s = 0; s < slots; ++s) {  // settled runs first, then room for the recent ones
@@ -176,11 +197,20 @@ void MihIndex::merge(Table& table) {
   }
   for (const Link& link : table.recent) {
     Slot& slot = table.slots[link.slot];
-    if (slot.recent != kDiscarded) ids[slot.offset++] = link.id;
+    if (slot.recent == kDiscarded) continue;
+    if (bound > 0 && skip_recent[link.slot] > 0) {
+      --skip_recent[link.slot];
+      continue;
+    }
+    ids[slot.offset++] = link.id;
   }
   for (size_t s = 0; s < slots; ++s) {
-    table.slots[s].offset = start[s];
-    if (table.slots[s].recent != kDiscarded) table.slots[s].recent = kNone;
+    Slot& slot = table.slots[s];
+    slot.offset = start[s];
+    if (slot.recent != kDiscarded) {
+      slot.recent = kNone;
+      slot.count = start[s + 1] - start[s];
+    }
   }
   table.slots[slots].offset = start[slots];
   table.ids = std::move(ids);

@@ -42,6 +42,7 @@ struct Options {
   size_t brute_max_keyframes = 10000;
   bool skip_baseline = false;
   size_t persistence_keyframes = 5000;
+  uint32_t bounded = 256;
   bool json = false;
 };
 
@@ -190,6 +191,19 @@ int run(const Options& opt) {
         }
       }
     }
+    Timing bounded;
+    if (opt.bounded > 0) {  // the same, with max_bucket_entries: query time bounded as the map grows
+      mild::DatabaseParams bounded_params = et_params;
+      bounded_params.index.max_bucket_entries = opt.bounded;
+      mild::KeyframeDatabase db(bounded_params);
+      for (size_t k = 0; k < n; ++k) db.insert(synthetic.keyframe(k));
+      for (const auto& q : queries) {
+        auto t = Clock::now();
+        const auto r = db.query(q);
+        bounded.samples.push_back(msSince(t));
+        (void)r;
+      }
+    }
     if (!opt.skip_baseline) {
       mild::tools::Mild2017Index old(et_params);
       for (size_t k = 0; k < n; ++k) old.insert(synthetic.keyframe(k));
@@ -206,6 +220,7 @@ int run(const Options& opt) {
     row["mih_ms_p95"] = mih.p95();
     row["mih_et_ms_median"] = mih_et.median();
     row["mih_et_ms_p95"] = mih_et.p95();
+    row["mih_bounded_ms_median"] = bounded.samples.empty() ? json(nullptr) : json(bounded.median());
     row["baseline_2017_ms_median"] = nullable(base_ms);
     row["baseline_2017_ms_p95"] = base_ms ? json(baseline.p95()) : json(nullptr);
     row["brute_ms_median"] = nullable(brute_ms);
@@ -228,6 +243,7 @@ int run(const Options& opt) {
                   mih_et.p95(), cell(base_ms, "%.2f").c_str(), cell(brute_ms, "%.1f").c_str(), bytes_per_feature,
                   insert_ms, cell(base_ms ? std::optional<double>(*base_ms / mih_et.median()) : std::nullopt, "%.1fx").c_str(),
                   cell(brute_ms ? std::optional<double>(*brute_ms / mih_et.median()) : std::nullopt, "%.0fx").c_str());
+      if (!bounded.samples.empty()) std::printf("%9s bounded buckets (%u entries): %.2f ms\n", "", opt.bounded, bounded.median());
       std::printf("%9s per query feature: %.0f candidates, %.0f full distances, %.1f votes\n", "",
                   row["candidates_per_query_feature"].get<double>(), row["full_distances_per_query_feature"].get<double>(),
                   row["votes_per_query_feature"].get<double>());
@@ -271,6 +287,8 @@ int main(int argc, char** argv) {
   app.add_option("--brute-queries", opt.brute_queries, "brute-force queries per size")->capture_default_str();
   app.add_option("--brute-max-keyframes", opt.brute_max_keyframes, "largest size brute force runs at")->capture_default_str();
   app.add_flag("--skip-baseline", opt.skip_baseline, "do not build the 2017 design");
+  app.add_option("--bounded", opt.bounded, "also time index/max_bucket_entries at this bound (0: skip)")
+      ->capture_default_str();
   app.add_option("--persistence-keyframes", opt.persistence_keyframes,
                  "time saving and loading a database of this many keyframes (0: skip)")->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");

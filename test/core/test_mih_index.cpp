@@ -121,6 +121,27 @@ TEST(MihIndex, DefaultCapFollowsThePaperFormula) {
   EXPECT_EQ(index.discardedBuckets(), 16u);
 }
 
+TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
+  std::mt19937_64 rng(9);
+  MihParams p = uncapped(16, 0);
+  p.max_bucket_entries = 4;
+  MihIndex index(p);
+  const Descriptor d = test::randomDescriptor(rng);
+  for (FeatureId k = 0; k < 10; ++k) index.insertKeyframe(&d, 1, k);
+  index.deferMerges(false);  // merge now: over-the-bound recent entries are dropped there
+  EXPECT_EQ(visited(index, d), (std::set<FeatureId>{6, 7, 8, 9}));
+  EXPECT_EQ(index.entryCount(), 16u * 4u);
+  for (FeatureId k = 10; k < 13; ++k) index.insertKeyframe(&d, 1, k);  // settled ones give way at once
+  EXPECT_EQ(visited(index, d), (std::set<FeatureId>{9, 10, 11, 12}));
+  EXPECT_EQ(index.entryCount(), 16u * 4u);
+  EXPECT_EQ(index.evictedEntries(), 16u * 9u);
+  // Other buckets are untouched, and the bound does not discard.
+  const Descriptor other = test::randomDescriptor(rng);
+  index.insertKeyframe(&other, 1, 13);
+  EXPECT_EQ(visited(index, other), (std::set<FeatureId>{13}));
+  EXPECT_EQ(index.discardedBuckets(), 0u);
+}
+
 TEST(MihIndex, IgnoresIdsAtOrBeyondTheLimit) {
   std::mt19937_64 rng(5);
   MihIndex index(uncapped(16, 0));
@@ -141,6 +162,9 @@ TEST(MihIndex, RejectsInvalidParameters) {
   EXPECT_THROW(MihIndex{p}, InvalidInput);
   p = MihParams{};
   p.bucket_cap_factor = 0;
+  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  p = MihParams{};
+  p.max_bucket_entries = 1;
   EXPECT_THROW(MihIndex{p}, InvalidInput);
 }
 
