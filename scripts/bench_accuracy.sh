@@ -2,7 +2,9 @@
 # Accuracy on the bench sequences (../shared/bench by default), with the default parameters and two
 # variants: without geometric verification, and with exact (brute-force) similarity instead of MIH.
 # Prints a Markdown table; the candidates, stats and logs stay in $OUT.
-#   ./scripts/bench_accuracy.sh [BENCH_DIR] [VARIANTS]     VARIANTS: default,unverified,exact (all)
+#   ./scripts/bench_accuracy.sh [BENCH_DIR] [VARIANTS]
+# VARIANTS, comma-separated: default, unverified, exact (the three by default), boundedN (unverified
+# with index/max_bucket_entries N, e.g. bounded128).
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
@@ -18,6 +20,7 @@ config_of() {
     default) : >"$OUT/default.yaml" ;;
     unverified) printf 'verification:\n  enabled: false\n' >"$OUT/unverified.yaml" ;;
     exact) printf 'verification:\n  enabled: false\nsimilarity:\n  search: exact\n' >"$OUT/exact.yaml" ;;
+    bounded[0-9]*) printf 'verification:\n  enabled: false\nindex:\n  max_bucket_entries: %s\n' "${1#bounded}" >"$OUT/$1.yaml" ;;
     *) echo "unknown variant $1" >&2; exit 2 ;;
   esac
   echo "$OUT/$1.yaml"

@@ -1,0 +1,50 @@
+// The benchmarks as a user runs them, on tiny inputs: they finish, and their --json line carries
+// the figures the README reports. (Their speed is not tested here: benchmarks measure, tests check.)
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "../common/run_command.hpp"
+
+namespace {
+
+using json = nlohmann::json;
+const std::string kSample = std::string(MILD_SOURCE_DIR) + "/sample/corridor";
+
+TEST(MildBenchMatch, PrintsBothRatiosAndTheRecoveredFractions) {
+  const auto run = mild::test::runCommand(std::string(MILD_BENCH_MATCH_BIN) + " --images " + kSample +
+                                          " --pairs 6 --repeats 1 --scale 2 --json");
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_NE(run.output.find("faster than brute force"), std::string::npos) << run.output;
+  const json out = json::parse(mild::test::lastLine(run.output));
+  for (const char* key : {"bf_over_sparse", "lsh_over_sparse", "sparse_recovery", "lsh_recovery", "sparse_ms_median"}) {
+    ASSERT_TRUE(out.contains(key)) << key;
+    EXPECT_GT(out[key].get<double>(), 0.0) << key;
+  }
+  EXPECT_EQ(out["pairs"].get<int>(), 6);
+  EXPECT_LE(out["sparse_recovery"].get<double>(), 1.0);
+  EXPECT_GT(out["sparse_recovery"].get<double>(), 0.8) << "sparse match finds most brute-force pairs under 50 bits";
+}
+
+TEST(MildBenchScale, ReportsEveryColumnPerSize) {
+  const auto run = mild::test::runCommand(std::string(MILD_BENCH_SCALE_BIN) + " --images " + kSample +
+                                          " --sizes 30,60 --features 200 --queries 3 --brute-queries 1 "
+                                          "--persistence-keyframes 20 --json");
+  ASSERT_EQ(run.status, 0) << run.output;
+  const json out = json::parse(mild::test::lastLine(run.output));
+  ASSERT_EQ(out["rows"].size(), 2u);
+  for (const auto& row : out["rows"]) {
+    for (const char* key : {"keyframes", "mih_ms_median", "mih_et_ms_median", "baseline_2017_ms_median",
+                            "brute_ms_median", "bytes_per_feature", "mih_bounded_ms_median"}) {
+      ASSERT_TRUE(row.contains(key)) << key << " in " << row.dump();
+    }
+    EXPECT_GT(row["bytes_per_feature"].get<double>(), 32.0) << "at least the descriptor";
+  }
+  EXPECT_EQ(out["persistence"]["keyframes"].get<int>(), 20);
+  EXPECT_GT(out["persistence"]["load_s"].get<double>(), 0.0);
+  const auto bad = mild::test::runCommand(std::string(MILD_BENCH_SCALE_BIN) + " --sizes 1k");
+  EXPECT_EQ(bad.status, 2);
+  EXPECT_NE(bad.output.find("--sizes"), std::string::npos) << bad.output;
+}
+
+}  // namespace
