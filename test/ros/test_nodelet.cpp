@@ -385,6 +385,27 @@ TEST(Determinism, SameBagAtTwoRatesGivesIdenticalLoopClosures) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The interface as ROS tools show it.
+
+TEST(Interface, RosmsgAndRossrvShowThePackagesDefinitions) {
+  const auto msg = mild::test::runCommand("rosmsg show mild_lcd/LoopClosure");
+  ASSERT_EQ(msg.status, 0) << msg.output;
+  for (const char* field : {"query_id", "candidates", "probability", "verified", "inliers", "stamp"}) {
+    EXPECT_NE(msg.output.find(field), std::string::npos) << field << " in\n" << msg.output;
+  }
+  const auto list = mild::test::runCommand("rosmsg package mild_lcd && rossrv package mild_lcd");
+  ASSERT_EQ(list.status, 0) << list.output;
+  for (const char* type : {"mild_lcd/Keyframe", "mild_lcd/LoopCandidate", "mild_lcd/SparseMatch", "mild_lcd/SaveDatabase",
+                           "mild_lcd/LoadDatabase"}) {
+    EXPECT_NE(list.output.find(type), std::string::npos) << type << " in\n" << list.output;
+  }
+  const auto services = mild::test::runCommand("rosservice list");
+  for (const char* service : {"/sparse_match", "/reset", "/save_database", "/load_database"}) {
+    EXPECT_NE(services.output.find(service), std::string::npos) << service << " in\n" << services.output;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Start-up validation: an invalid parameter stops the node with a message naming it.
 
 TEST(StartUp, InvalidParameterIsRejectedNamingIt) {
