@@ -2,8 +2,8 @@
 # Soak test (not part of scripts/test.sh): the standalone node fed the embedded sample in a loop at
 # 30 Hz (the 10 Hz bag played at 3x) for SOAK_SECONDS (600), on a private roscore. Reports memory
 # growth per keyframe, queue drops and query-time drift (JSON in .build/soak/report.json).
-#   ./scripts/soak.sh                      # 10 minutes
-#   SOAK_SECONDS=120 RATE=3 ./scripts/soak.sh
+#   ./scripts/soak.sh                      # 10 minutes, default parameters
+#   SOAK_SECONDS=120 RATE=3 CONFIG=my.yaml ./scripts/soak.sh   # detector parameters from a YAML file
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
@@ -11,7 +11,7 @@ mild_install_deps
 mild_configure_and_build --target mild_lcd_nodelet mild_lcd_node mild_bags
 mild_source_devel
 
-OUT="$BUILD_DIR/soak"
+OUT="${SOAK_OUT:-$BUILD_DIR/soak}"
 BAG="$BUILD_DIR/bags/sample_corridor.bag"
 mkdir -p "$OUT"
 PORT=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])')
@@ -27,6 +27,7 @@ roscore -p "$PORT" >"$OUT/roscore.log" 2>&1 &
 STARTED+=($!)
 until rosparam get /rosdistro >/dev/null 2>&1; do sleep 0.2; done
 
+[[ -z "${CONFIG:-}" ]] || rosparam load "$CONFIG" /mild_lcd
 rosrun mild_lcd mild_lcd_node __name:=mild_lcd image:=/camera/image _use_keyframe_input:=false \
   >"$OUT/node.log" 2>&1 &
 NODE=$!

@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -227,6 +228,13 @@ TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
   const std::string target = path("map.mild");
   saveDetector(small, target);
 
+  // Kill moments spread over a few save cycles, however fast this build saves (sanitizers slow it).
+  const auto start = std::chrono::steady_clock::now();
+  saveDetector(large, path("timing.mild"));
+  saveDetector(small, path("timing.mild"));
+  fs::remove(path("timing.mild"));
+  const int cycle_us = static_cast<int>(
+      std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - start).count());
   std::mt19937 rng(11);
   size_t saw_small = 0, saw_large = 0;
   for (int attempt = 0; attempt < 25; ++attempt) {
@@ -238,7 +246,7 @@ TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
         saveDetector(small, target);
       }
     }
-    usleep(std::uniform_int_distribution<int>(0, 40000)(rng));
+    usleep(std::uniform_int_distribution<int>(0, 3 * cycle_us + 1000)(rng));
     kill(child, SIGKILL);
     waitpid(child, nullptr, 0);
     const DetectorState state = readDetectorFile(target);  // throws if torn

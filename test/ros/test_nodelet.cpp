@@ -409,14 +409,14 @@ TEST(Interface, RosmsgAndRossrvShowThePackagesDefinitions) {
 // Start-up validation: an invalid parameter stops the node with a message naming it.
 
 TEST(StartUp, InvalidParameterIsRejectedNamingIt) {
-  const auto invalid =
-      mild::test::runCommand("timeout 30 rosrun mild_lcd mild_lcd_node __name:=broken_lcd __ns:=/broken _index/num_tables:=3");
+  // The node of this build (rosrun would ask which one when several builds are on the path).
+  const std::string node = std::string("timeout 30 ") + MILD_NODE_BIN;
+  const auto invalid = mild::test::runCommand(node + " __name:=broken_lcd __ns:=/broken _index/num_tables:=3");
   EXPECT_NE(invalid.status, 0) << invalid.output;
   EXPECT_NE(invalid.status, 124) << "the node kept running with an invalid parameter";
   EXPECT_NE(invalid.output.find("index/num_tables"), std::string::npos) << invalid.output;
 
-  const auto typo = mild::test::runCommand(
-      "timeout 30 rosrun mild_lcd mild_lcd_node __name:=typo_lcd __ns:=/typo _filter/loop_persistance:=0.9");
+  const auto typo = mild::test::runCommand(node + " __name:=typo_lcd __ns:=/typo _filter/loop_persistance:=0.9");
   EXPECT_NE(typo.status, 0) << typo.output;
   EXPECT_NE(typo.output.find("loop_persistance"), std::string::npos) << typo.output;
 }

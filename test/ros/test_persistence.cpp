@@ -132,8 +132,8 @@ pid_t startNode(const std::string& ns, const std::string& map) {
   const pid_t pid = fork();
   if (pid == 0) {
     const std::string ns_arg = "__ns:=" + ns, path_arg = "_database_path:=" + map;
-    execlp("rosrun", "rosrun", "mild_lcd", "mild_lcd_node", ns_arg.c_str(), "__name:=mild_lcd", path_arg.c_str(),
-           "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", path_arg.c_str(), "_load_on_start:=true",
+          "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
     _exit(127);
   }
   return pid;
@@ -170,7 +170,7 @@ TEST(Persistence, LoadOnStartAndSaveOnShutdown) {
   // overwriting it on shutdown.
   const std::string corrupt = (scratch() / "corrupt_start.mild").string();
   std::ofstream(corrupt) << "definitely not a database";
-  const auto run = mild::test::runCommand("timeout 30 rosrun mild_lcd mild_lcd_node __ns:=/broken_map __name:=mild_lcd "
+  const auto run = mild::test::runCommand(std::string("timeout 30 ") + MILD_NODE_BIN + " __ns:=/broken_map __name:=mild_lcd "
                                           "_database_path:=" + corrupt + " _load_on_start:=true _use_image_input:=false");
   EXPECT_NE(run.status, 0);
   EXPECT_NE(run.status, 124) << "kept running on a corrupt map";
