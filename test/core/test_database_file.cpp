@@ -9,6 +9,7 @@
 #include <fstream>
 #include <random>
 
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <zlib.h>
 
@@ -222,6 +223,7 @@ TEST_F(DatabaseFile, SavingIntoAMissingFolderFailsAndKeepsNothingHalfWritten) {
 // A process killed (SIGKILL) at any moment of a save leaves the previous file complete and
 // loadable, or the new one: never a mix, never a torn file.
 TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
+  cv::setNumThreads(0);  // no OpenCV worker threads across fork(): the child must be able to run
   LoopDetector small(fixtureParams()), large(fixtureParams());
   process(small, 0, 5);
   process(large, 0, 60);
