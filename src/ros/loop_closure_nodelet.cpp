@@ -106,6 +106,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         } catch (const mild::InvalidInput& e) {
           // Starting empty would overwrite the file on shutdown: refuse, so that it can be looked at.
           NODELET_FATAL("cannot load the database at start-up: %s", e.what());
+          detector_.reset();  // nothing for save_on_shutdown to write over it
           throw;
         }
       }

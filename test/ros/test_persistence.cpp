@@ -171,7 +171,8 @@ TEST(Persistence, LoadOnStartAndSaveOnShutdown) {
   const std::string corrupt = (scratch() / "corrupt_start.mild").string();
   std::ofstream(corrupt) << "definitely not a database";
   const auto run = mild::test::runCommand(std::string("timeout 30 ") + MILD_NODE_BIN + " __ns:=/broken_map __name:=mild_lcd "
-                                          "_database_path:=" + corrupt + " _load_on_start:=true _use_image_input:=false");
+                                          "_database_path:=" + corrupt +
+                                          " _load_on_start:=true _save_on_shutdown:=true _use_image_input:=false");
   EXPECT_NE(run.status, 0);
   EXPECT_NE(run.status, 124) << "kept running on a corrupt map";
   EXPECT_NE(run.output.find(corrupt), std::string::npos) << run.output;
