@@ -28,7 +28,7 @@ STARTED+=($!)
 until rosparam get /rosdistro >/dev/null 2>&1; do sleep 0.2; done
 
 [[ -z "${CONFIG:-}" ]] || rosparam load "$CONFIG" /mild_lcd
-rosrun mild_lcd mild_lcd_node __name:=mild_lcd image:=/camera/image _use_keyframe_input:=false \
+"$BUILD_DIR/devel/lib/mild_lcd/mild_lcd_node" __name:=mild_lcd image:=/camera/image _use_keyframe_input:=false \
   >"$OUT/node.log" 2>&1 &
 NODE=$!
 STARTED=("$NODE" "${STARTED[@]}")
@@ -37,4 +37,4 @@ until rostopic info /camera/image 2>/dev/null | grep -q mild_lcd; do sleep 0.2; 
 rosbag play --quiet --loop -r "${RATE:-3}" "$BAG" --topics /camera/image >"$OUT/play.log" 2>&1 &
 STARTED=($! "${STARTED[@]}")
 echo "[mild_lcd] soak: ${SOAK_SECONDS:-600}s at $((10 * ${RATE:-3})) Hz; report in $OUT/report.json"
-rosrun mild_lcd soak_monitor.py _pid:="$NODE" _duration:="${SOAK_SECONDS:-600}" _report:="$OUT/report.json"
+/usr/bin/python3 "$REPO/scripts/soak_monitor.py" _pid:="$NODE" _duration:="${SOAK_SECONDS:-600}" _report:="$OUT/report.json"

@@ -77,6 +77,9 @@ class Monitor:
             "max_queue_depth": max(s[3] for s in self.samples),
             "rss_start_mb": round(self.samples[0][1] / 1e6, 1),
             "rss_end_mb": round(self.samples[-1][1] / 1e6, 1),
+            # What the detector itself accounts for (arrays at their capacity); RSS also holds the
+            # allocator's freed copies of arrays that grew, the libraries and the message buffers.
+            "database_memory_mb": float(self.diag.get("memory (MB)", "nan")),
             "memory_growth_bytes_per_keyframe": round(slope([g[0] for g in grown], [g[1] for g in grown])),
             "query_ms_first_minute": round(statistics.median(first), 2) if first else None,
             "query_ms_last_minute": round(statistics.median(last), 2) if last else None,

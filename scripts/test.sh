@@ -3,13 +3,14 @@
 # each libFuzzer target for FUZZ_SECONDS (30), and prints `N passed, N failed` as its last line.
 # Exits non-zero when anything failed or did not build.
 #   ./scripts/test.sh                                   # everything
-#   MILD_SANITIZE=address,undefined ./scripts/test.sh   # everything under ASan + UBSan (.build-address-undefined/)
-#   MILD_SANITIZE=thread ./scripts/test.sh              # the gtests under ThreadSanitizer (.build-thread/)
+#   MILD_SANITIZE=address,undefined ./scripts/test.sh   # everything under ASan + UBSan (build/sanitize-address-undefined/)
+#   MILD_SANITIZE=thread ./scripts/test.sh              # the gtests under ThreadSanitizer (build/sanitize-thread/)
 #   FUZZ_SECONDS=0 ./scripts/test.sh                    # without the fuzzers
 set -eo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 if [[ -n "${MILD_SANITIZE:-}" ]]; then
-  BUILD_DIR="${BUILD_DIR:-$HERE/../.build-${MILD_SANITIZE//,/-}}"
+  # Under build/, where rosrun does not look, so `rosrun mild_lcd mild_lcd_node` stays unambiguous.
+  BUILD_DIR="${BUILD_DIR:-$HERE/../build/sanitize-${MILD_SANITIZE//,/-}}"
   MILD_CMAKE_ARGS="${MILD_CMAKE_ARGS:-} -DMILD_SANITIZE=$MILD_SANITIZE"
   FUZZ_SECONDS="${FUZZ_SECONDS:-0}"  # the fuzzers carry their own sanitizers
 fi

@@ -49,7 +49,7 @@ struct ProbeCounters {
 // (every slot preallocated), or a slot number handed out on first use for longer substrings.
 // Settled entries sit in one contiguous array, bucket after bucket (compressed sparse rows), so a
 // probe reads a bucket's ids in one sequential run; entries added since the last merge sit in
-// per-bucket chains. When the chains of a table hold more than 1/16 of its settled entries they
+// per-bucket chains. When the chains of a table hold more than 1/64 of its settled entries they
 // are merged into the array: each entry is copied a bounded number of times over its life, and
 // no bucket carries the spare capacity (or the 24-byte header) of a vector of its own.
 class MihIndex {

@@ -3,10 +3,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <deque>
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <unordered_map>
 
@@ -187,6 +189,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     std_msgs::Header header;
     mild::DetectionResult result;
     cv::Mat query_image;
+    std::optional<DatabaseSnapshot> snapshot;
     try {
       std::lock_guard<std::mutex> lock(detector_mutex_);
       if (input.image || input.compressed) {
@@ -208,6 +211,13 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       loop_pub_.publish(loopClosureToMsg(result, header, detector_->size(), stamp_of));
       rememberForDebug(result.query_id, query_image);
       if (debug_pub_.getNumSubscribers() > 0) publishDebugImage(result, header);
+      // memoryBytes() walks every keyframe, so at most once a second; under a steady stream
+      // the diagnostics would otherwise never find the detector free and go stale.
+      const auto now = std::chrono::steady_clock::now();
+      if (now >= next_snapshot_) {
+        snapshot = snapshotOfDatabase();
+        next_snapshot_ = now + std::chrono::seconds(1);
+      }
     } catch (const mild::InvalidInput& e) {
       ++rejected_;
       NODELET_WARN_THROTTLE(2.0, "rejected keyframe (stamp %.3f): %s (%zu rejected so far)", header.stamp.toSec(), e.what(),
@@ -219,6 +229,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       return;
     }
     std::lock_guard<std::mutex> lock(stats_mutex_);
+    if (snapshot) database_snapshot_ = *snapshot;
     ++processed_;
     last_ms_ = result.stats.extract_ms + result.stats.query_ms + result.stats.filter_ms + result.stats.verify_ms;
     total_ms_ += last_ms_;
@@ -343,20 +354,25 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  struct DatabaseSnapshot {
+    size_t keyframes = 0, features = 0, memory_bytes = 0, discarded_buckets = 0;
+  };
+  // Called with detector_mutex_ held.
+  DatabaseSnapshot snapshotOfDatabase() const {
+    return {detector_->size(), detector_->database().featureCount(), detector_->memoryBytes(),
+            detector_->database().index().discardedBuckets()};
+  }
+
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
-    size_t keyframes = 0, features = 0, memory = 0, discarded = 0;
+    std::optional<DatabaseSnapshot> fresh;
     {
+      // Never wait for a keyframe in progress: a busy worker refreshes the snapshot itself.
       std::unique_lock<std::mutex> lock(detector_mutex_, std::try_to_lock);
-      if (lock.owns_lock()) {  // never wait for a keyframe in progress; report what is cached
-        cached_keyframes_ = detector_->size();
-        cached_features_ = detector_->database().featureCount();
-        cached_memory_ = detector_->memoryBytes();
-        cached_discarded_ = detector_->database().index().discardedBuckets();
-      }
-      keyframes = cached_keyframes_, features = cached_features_, memory = cached_memory_, discarded = cached_discarded_;
+      if (lock.owns_lock()) fresh = snapshotOfDatabase();
     }
     const size_t dropped = queue_->dropped(), rejected = rejected_.load(), depth = queue_->size();
     std::lock_guard<std::mutex> lock(stats_mutex_);
+    if (fresh) database_snapshot_ = *fresh;
     if (dropped > reported_dropped_ || rejected > reported_rejected_) {
       status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu dropped, %zu rejected keyframes since start", dropped,
                       rejected);
@@ -365,10 +381,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
     reported_dropped_ = dropped;
     reported_rejected_ = rejected;
-    status.add("database keyframes", keyframes);
-    status.add("database features", features);
-    status.add("memory (MB)", static_cast<double>(memory) / 1e6);
-    status.add("discarded buckets", discarded);
+    status.add("database keyframes", database_snapshot_.keyframes);
+    status.add("database features", database_snapshot_.features);
+    status.add("memory (MB)", static_cast<double>(database_snapshot_.memory_bytes) / 1e6);
+    status.add("discarded buckets", database_snapshot_.discarded_buckets);
     status.add("processed keyframes", processed_);
     status.add("queue depth", depth);
     status.add("queue capacity", queue_->capacity());
@@ -402,7 +418,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   std::mutex stats_mutex_;
   size_t processed_ = 0, reported_dropped_ = 0, reported_rejected_ = 0;
   double last_ms_ = 0.0, total_ms_ = 0.0, last_query_ms_ = 0.0, total_query_ms_ = 0.0;
-  size_t cached_keyframes_ = 0, cached_features_ = 0, cached_memory_ = 0, cached_discarded_ = 0;
+  DatabaseSnapshot database_snapshot_;                      // under stats_mutex_
+  std::chrono::steady_clock::time_point next_snapshot_{};  // worker only
 };
 
 }  // namespace mild_lcd

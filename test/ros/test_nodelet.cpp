@@ -129,6 +129,16 @@ TEST_F(Replay, AnswersEveryKeyframeOnceInArrivalOrder) {
   }
 }
 
+TEST_F(Replay, DiagnosticsDescribeTheDatabase) {
+  const std::string keyframes = std::to_string(kFixtureFrames);
+  EXPECT_EQ(diagnosticValue("database keyframes", keyframes, 10.0), keyframes);
+  const std::string memory = diagnosticValue("memory (MB)", "(wait 3 s for the latest)", 3.0);
+  ASSERT_FALSE(memory.empty());
+  // 60 keyframes of a few hundred features: at least their descriptors, far less than a gigabyte.
+  EXPECT_GT(std::stod(memory), 60 * 300 * 32 / 1e6);
+  EXPECT_LT(std::stod(memory), 1000.0);
+}
+
 TEST_F(Replay, ReportsTheKnownLoopAndNoFalsePositive) {
   const mild::GroundTruth truth = mild::loadGroundTruth(kFixtureDir + "/gt_loops.txt");
   const auto msgs = outputs_->messages();
