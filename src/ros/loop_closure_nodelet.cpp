@@ -1,6 +1,8 @@
 // mild_lcd/LoopClosureNodelet: keyframe images or features in, loop closures with probabilities
 // out. It converts messages and calls mild::LoopDetector; the algorithm lives in the core.
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -217,6 +219,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       if (now >= next_snapshot_) {
         snapshot = snapshotOfDatabase();
         next_snapshot_ = now + std::chrono::seconds(1);
+        // The index's arrays grow by reallocation; glibc keeps the smaller copies they leave
+        // behind in its heap, where nothing else fits them, and the process would grow about 2.5
+        // times as fast as the map. Hand such free pages back (soak: see README).
+        malloc_trim(0);
       }
     } catch (const mild::InvalidInput& e) {
       ++rejected_;
