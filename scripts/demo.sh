@@ -38,11 +38,11 @@ rosparam get /rosdistro >/dev/null 2>&1 || { echo "[mild_lcd] roscore did not st
 
 echo "[mild_lcd] replaying $BAG ($FRAMES keyframes) through mild_lcd/LoopClosureNodelet on $ROS_MASTER_URI"
 roslaunch --wait mild_lcd replay.launch bag:="$BAG" image:=/camera/image rate:="${RATE:-2}" frames:="$FRAMES" \
-  gt:="$SAMPLE/gt_loops.txt" output_csv:="$OUT/ros_candidates.csv" >"$OUT/roslaunch.log" 2>&1 &
+  gt:="$SAMPLE/gt_loops.txt" output_csv:="$OUT/ros_candidates.csv" every_keyframe:=true >"$OUT/roslaunch.log" 2>&1 &
 LAUNCH=$!
 STARTED=("$LAUNCH" "${STARTED[@]}")
 # The printer's lines (loop closures, score) as they arrive; roslaunch ends when the printer does.
-tail -n +1 -f "$OUT/roslaunch.log" --pid="$LAUNCH" | grep --line-buffered -E '^(loop closure|processed|score|recall|average|max F1|loop queries|only)'
+tail -n +1 -f "$OUT/roslaunch.log" --pid="$LAUNCH" | grep --line-buffered -E '^(keyframe [0-9]+:|loop closure|processed|score|recall|average|max F1|loop queries|only)'
 wait "$LAUNCH" || { echo "[mild_lcd] the replay failed (see $OUT/roslaunch.log)" >&2; exit 1; }
 STARTED=("${STARTED[@]:1}")
 

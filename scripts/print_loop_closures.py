@@ -4,6 +4,7 @@
 ROS node. Subscribes to `loop_closure` (mild_lcd/LoopClosure). Private parameters:
   ~min_probability  print closures whose best candidate reaches this probability (default 0.5)
   ~verified_only    score and print verified candidates only (default true, as mild_offline)
+  ~every_keyframe   also print one line per keyframe: its best candidate or "no loop", features, time
   ~frames           exit after this many LoopClosure messages, printing the score (0: run until killed)
   ~gt               gt_loops.txt whose frame indices are the keyframe ids (default: none)
   ~min_gap          EVALUATION.md's minimum gap (default 40)
@@ -25,6 +26,7 @@ class Printer:
         self.min_probability = rospy.get_param("~min_probability", 0.5)
         self.verified_only = rospy.get_param("~verified_only", True)
         self.frames = int(rospy.get_param("~frames", 0))
+        self.every_keyframe = rospy.get_param("~every_keyframe", False)
         self.gt = rospy.get_param("~gt", "")
         self.min_gap = int(rospy.get_param("~min_gap", 40))
         self.output_csv = rospy.get_param("~output_csv", "")
@@ -46,6 +48,12 @@ class Printer:
             c = kept[0]
             print(f"loop closure: keyframe {msg.query_id} -> {c.id}  probability {c.probability:.3f}  "
                   f"inliers {c.inliers}{' verified' if c.verified else ''}", flush=True)
+        elif self.every_keyframe:
+            best = (f"best {msg.candidates[0].id} p={msg.candidates[0].probability:.3f}"
+                    f"{'' if msg.candidates[0].verified else ' unverified'}") if msg.candidates else "no candidate"
+            total_ms = msg.extract_ms + msg.query_ms + msg.filter_ms + msg.verify_ms
+            print(f"keyframe {msg.query_id}: no loop ({best}; {msg.features} features, "
+                  f"{msg.database_size} stored, {total_ms:.1f} ms)", flush=True)
 
     def done(self):
         if self.frames <= 0:
