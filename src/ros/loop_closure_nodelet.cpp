@@ -221,7 +221,9 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         next_snapshot_ = now + std::chrono::seconds(1);
         // The index's arrays grow by reallocation; glibc keeps the smaller copies they leave
         // behind in its heap, where nothing else fits them, and the process would grow about 2.5
-        // times as fast as the map. Hand such free pages back (soak: see README).
+        // times as fast as the map. Hand such free pages back (soak: see README). Here, once a
+        // second, rather than in the core after every merge: a trim walks the whole heap, and
+        // trimming per merge made inserting a keyframe four times slower (4.3 -> 16.5 ms).
         malloc_trim(0);
       }
     } catch (const mild::InvalidInput& e) {
