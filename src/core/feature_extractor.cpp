@@ -1,5 +1,6 @@
 #include "mild_lcd/feature_extractor.hpp"
 
+#include <algorithm>
 #include <string>
 
 #include <opencv2/imgproc.hpp>
@@ -67,8 +68,16 @@ OrbExtractor::OrbExtractor(const OrbParams& params) : params_((params.validate()
 Features OrbExtractor::extract(const cv::Mat& image, PixelFormat format) const {
   const cv::Mat gray = toGray(image, format);
   Features out;
+  // ORB keeps no keypoint within edge_threshold of the border, so a thinner image has none; and
+  // OpenCV's pyramid fails on it (a level rounds to 0 pixels).
+  if (std::min(gray.cols, gray.rows) < 2 * params_.edge_threshold + 1) return out;
   cv::Mat descriptors;
-  orb_->detectAndCompute(gray, cv::noArray(), out.keypoints, descriptors);
+  try {
+    orb_->detectAndCompute(gray, cv::noArray(), out.keypoints, descriptors);
+  } catch (const cv::Exception& e) {
+    throw InvalidInput("ORB cannot process a " + std::to_string(gray.cols) + " x " + std::to_string(gray.rows) +
+                       " image with these orb/ parameters: " + e.err);
+  }
   out.descriptors = descriptorsFromMat(descriptors);
   if (out.descriptors.size() != out.keypoints.size()) out.keypoints.clear(), out.descriptors.clear();
   return out;

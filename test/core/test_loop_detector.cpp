@@ -108,6 +108,13 @@ TEST(LoopDetector, TinyAndFeaturelessImagesAreKeyframesWithoutFeatures) {
   EXPECT_EQ(detector.size(), 1u);
   detector.process(cv::Mat(480, 640, CV_8UC1, cv::Scalar(0)), PixelFormat::kGray, 1.0);
   EXPECT_EQ(detector.size(), 2u);
+  // One or two pixels thin (OpenCV's ORB pyramid would fail on them; found by fuzzing).
+  cv::Mat stripes(96, 2, CV_8UC1);
+  cv::randu(stripes, 0, 256);
+  for (const cv::Mat& thin : {stripes, cv::Mat(stripes.t()), cv::Mat(stripes.col(0))}) {
+    EXPECT_EQ(detector.process(thin, PixelFormat::kGray, 2.0).stats.features, 0u);
+  }
+  EXPECT_EQ(detector.size(), 5u);
 }
 
 TEST(LoopDetector, KeepsGivenIdsAndAssignsTheNextFreeOne) {
