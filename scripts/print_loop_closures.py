@@ -10,7 +10,10 @@ ROS node. Subscribes to `loop_closure` (mild_lcd/LoopClosure). Private parameter
   ~min_gap          EVALUATION.md's minimum gap (default 40)
   ~output_csv       also write the scored rows query,candidate,score to this file
   ~idle_timeout     with ~frames set, give up this many seconds after the last message (default 30)
+  ~result_file      write {"received", "frames", "scored", "ok"} here as JSON when done (roslaunch
+                    exits 0 whatever a required node's exit code, so scripts read this instead)
 """
+import json
 import os
 import subprocess
 import sys
@@ -31,6 +34,7 @@ class Printer:
         self.min_gap = int(rospy.get_param("~min_gap", 40))
         self.output_csv = rospy.get_param("~output_csv", "")
         self.idle_timeout = float(rospy.get_param("~idle_timeout", 30.0))
+        self.result_file = rospy.get_param("~result_file", "")
         self.rows = []
         self.received = 0
         self.closures = 0
@@ -61,6 +65,7 @@ class Printer:
         return self.received >= self.frames or time.monotonic() - self.last > self.idle_timeout
 
     def report(self):
+        """Prints the summary and, given ground truth, the score; False when scoring failed."""
         print(f"processed {self.received} keyframes, {self.closures} loop closures at probability >= "
               f"{self.min_probability}", flush=True)
         path = self.output_csv or os.path.join(tempfile.mkdtemp(prefix="mild_lcd_"), "candidates.csv")
@@ -72,6 +77,10 @@ class Printer:
             score = subprocess.run(["rosrun", "mild_lcd", "mild_score", self.gt, path, "--min-gap", str(self.min_gap)],
                                    capture_output=True, text=True)
             print("score against " + self.gt + ":\n" + (score.stdout or score.stderr).rstrip(), flush=True)
+            if score.returncode != 0:
+                print(f"scoring failed (mild_score exit code {score.returncode})", file=sys.stderr, flush=True)
+                return False
+        return True
 
 
 def main():
@@ -83,9 +92,15 @@ def main():
             rate.sleep()
         else:
             time.sleep(0.1)  # sim time may stand still once the bag ends
-    printer.report()
-    if printer.frames > 0 and printer.received < printer.frames:
+    scored = printer.report()
+    complete = printer.frames <= 0 or printer.received >= printer.frames
+    if not complete:
         print(f"only {printer.received} of {printer.frames} keyframes were answered", file=sys.stderr, flush=True)
+    if printer.result_file:
+        with open(printer.result_file, "w") as f:
+            json.dump({"received": printer.received, "frames": printer.frames, "scored": scored,
+                       "ok": scored and complete}, f)
+    if not (scored and complete):
         sys.exit(1)
 
 

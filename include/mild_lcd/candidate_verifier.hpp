@@ -3,6 +3,7 @@
 #include <vector>
 
 #include "mild_lcd/feature_extractor.hpp"
+#include "mild_lcd/feature_match.hpp"
 
 namespace mild {
 
@@ -13,6 +14,7 @@ struct Verification {
   int matches = 0;      // descriptor matches fed to the geometric model
   int inliers = 0;      // matches consistent with it
   double inlier_ratio = 0.0;
+  std::vector<FeatureMatch> inlier_matches;  // the matches consistent with the model
 };
 
 // The seam between loop detection and geometry: given the query's and a candidate's features,

@@ -46,9 +46,10 @@ struct Metrics {
   std::vector<PrPoint> curve;
 };
 
-// Throws InvalidInput naming the file and line for unreadable files and malformed lines. Blank
-// lines and lines starting with '#' are skipped.
-GroundTruth loadGroundTruth(const std::string& path);
+// Throws InvalidInput naming the file and line for unreadable files, malformed lines, pairs that are
+// not 0 <= j < i (< frames when frames >= 0, the sequence's length) and files without any pair.
+// Blank lines and lines starting with '#' are skipped.
+GroundTruth loadGroundTruth(const std::string& path, long frames = -1);
 
 // Reads a candidates CSV (rows "query,candidate,score", header optional) the way score.py does.
 // Throws InvalidInput naming the file when it cannot be opened.

@@ -87,6 +87,19 @@ struct DetectorState {
   double no_loop = 1.0;
 };
 
+// A state checked and turned into a ready database and filter, waiting to replace a detector's.
+struct PreparedRestore {
+  KeyframeDatabase database;
+  LoopFilter filter;
+  std::vector<KeyframeRecord> records;
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
+  uint64_t next_id = 0;
+  KeyframeIndex session_start = 0;
+};
+
+// Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
+constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
+
 // The loop-closure pipeline: features -> MIH database (insert and query) -> Bayesian filter ->
 // ranked candidates -> optional geometric verification. Not thread-safe: callers serialise access.
 class LoopDetector {
@@ -101,8 +114,9 @@ class LoopDetector {
   void setVerifier(std::unique_ptr<CandidateVerifier> verifier) { verifier_ = std::move(verifier); }
   bool verifies() const { return verifier_ != nullptr; }
 
-  // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image or
-  // an id already in the database. Without an id, the next free one (largest so far + 1) is used.
+  // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image, an
+  // id already in the database or above kMaxKeyframeId. Without an id, the next free one (largest so
+  // far + 1) is used; CapacityError once that would pass kMaxKeyframeId.
   DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
                           std::optional<uint64_t> id = std::nullopt);
   // Same, for features computed elsewhere (e.g. by the SLAM front-end).
@@ -115,6 +129,10 @@ class LoopDetector {
   // since they were not seen a moment ago, and the filter starts from "no loop".
   // Throws InvalidInput, changing nothing, when the state is inconsistent.
   void restore(DetectorState state, bool continue_session);
+  // restore() in two steps: prepareRestore reads only the detector's parameters (fixed at
+  // construction), so it may run without the caller's lock; commitRestore cannot fail.
+  PreparedRestore prepareRestore(DetectorState state, bool continue_session) const;
+  void commitRestore(PreparedRestore&& prepared);
   // Keyframes [0, sessionStart()) come from an earlier session and are always eligible.
   KeyframeIndex sessionStart() const { return session_start_; }
 
@@ -130,6 +148,7 @@ class LoopDetector {
   void reset();
 
  private:
+  void checkId(std::optional<uint64_t> id) const;
   KeyframeIndex eligibleCount(double stamp) const;
   std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief,
                                               const std::vector<double>& similarity) const;

@@ -6,6 +6,7 @@
 #include <opencv2/core.hpp>
 
 #include "mild_lcd/descriptor.hpp"
+#include "mild_lcd/feature_match.hpp"
 #include "mild_lcd/substring_layout.hpp"
 
 namespace mild {
@@ -28,13 +29,6 @@ struct SparseMatchParams {
   double max_keypoint_distance = 0.0;
 
   void validate() const;  // throws InvalidInput naming the first invalid field
-};
-
-struct FeatureMatch {
-  int query = 0;
-  int train = 0;
-  int distance = 0;
-  bool operator==(const FeatureMatch& o) const { return query == o.query && train == o.train && distance == o.distance; }
 };
 
 // Work done by the last match() call (for benchmarks and tests).

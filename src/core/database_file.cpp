@@ -1,17 +1,20 @@
 #include "mild_lcd/database_file.hpp"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
+#include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "mild_lcd/errors.hpp"
@@ -20,7 +23,6 @@
 namespace mild {
 namespace {
 
-namespace fs = std::filesystem;
 
 constexpr char kMagic[8] = {'M', 'I', 'L', 'D', 'L', 'C', 'D', '\0'};
 constexpr size_t kHeaderBytes = 32;
@@ -67,7 +69,7 @@ class PayloadWriter {
     while (done < buffer_.size()) {
       const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
       if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) throw InvalidInput(path_ + ": cannot write (" + errnoText() + ")");
+      if (n <= 0) throw IoError(path_ + ": cannot write (" + errnoText() + ")");
       done += static_cast<size_t>(n);
     }
     buffer_.clear();
@@ -170,18 +172,93 @@ std::map<std::string, std::string> parameterLines(const std::string& text) {
 
 }  // namespace
 
-void saveDetector(const LoopDetector& detector, const std::string& path) {
-  const fs::path target(path);
-  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw InvalidInput(path + ": cannot write a temporary file beside it (" + errnoText() + ")");
+namespace {
+
+// Temporary files of saves to `target`: "<target>.tmp.<8 hex digits>".
+std::string temporaryPrefix(const std::string& target) { return target + ".tmp."; }
+
+std::string randomSuffix() {
+  static std::atomic<uint64_t> counter{0};
+  uint64_t x = static_cast<uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count()) ^
+               (static_cast<uint64_t>(::getpid()) << 32) ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdull;
+  x ^= x >> 33;
+  char text[17];
+  std::snprintf(text, sizeof(text), "%016llx", static_cast<unsigned long long>(x));
+  return std::string(text, 8);
+}
+
+// Removes temporary files that killed saves left behind. A save in progress holds an exclusive lock
+// on its file, so a file whose lock can be taken is abandoned; the age test covers the instant
+// between a save creating its file and locking it.
+void removeStaleTemporaries(const ConfinedFile& file) {
+  const int dup_fd = ::dup(file.folder());
+  if (dup_fd < 0) return;
+  DIR* dir = ::fdopendir(dup_fd);
+  if (dir == nullptr) {
+    ::close(dup_fd);
+    return;
+  }
+  const std::string prefix = temporaryPrefix(file.name());
+  const auto now = std::chrono::system_clock::now();
+  std::vector<std::string> stale;
+  while (const dirent* entry = ::readdir(dir)) {
+    const std::string name = entry->d_name;
+    if (name.size() != prefix.size() + 8 || name.compare(0, prefix.size(), prefix) != 0) continue;
+    const int fd = ::openat(file.folder(), name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) continue;  // a link or a vanished file: not ours to remove
+    struct stat st {};
+    const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+    const auto modified = std::chrono::system_clock::from_time_t(st.st_mtime);
+    if (regular && now - modified > std::chrono::seconds(60) && ::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      stale.push_back(name);
+    }
+    ::close(fd);
+  }
+  ::closedir(dir);
+  for (const std::string& name : stale) ::unlinkat(file.folder(), name.c_str(), 0);
+}
+
+// A new temporary file beside the target, created exclusively (never an existing file or a link)
+// and locked for the duration of the save.
+int createTemporary(const ConfinedFile& file, std::string& name) {
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    name = temporaryPrefix(file.name()) + randomSuffix();
+    const int fd = ::openat(file.folder(), name.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+    if (fd >= 0) {
+      ::flock(fd, LOCK_EX);
+      return fd;
+    }
+    if (errno != EEXIST) break;
+  }
+  throw IoError(file.display() + ": cannot create a temporary file beside it (" + errnoText() + ")");
+}
+
+void writeAll(int fd, const std::vector<uint8_t>& bytes, off_t offset, const std::string& display) {
+  size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::pwrite(fd, bytes.data() + done, bytes.size() - done, offset + static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError(display + ": cannot write (" + errnoText() + ")");
+    done += static_cast<size_t>(n);
+  }
+}
+
+}  // namespace
+
+void saveDetector(const LoopDetector& detector, const std::string& path) { saveDetector(detector, fileAtPath(path)); }
+
+void saveDetector(const LoopDetector& detector, const ConfinedFile& file) {
+  file.refuseIfNotRegular();
+  removeStaleTemporaries(file);
+  std::string tmp;
+  const int fd = createTemporary(file, tmp);
   try {
     std::vector<uint8_t> header(kHeaderBytes, 0);
-    if (::write(fd, header.data(), header.size()) != static_cast<ssize_t>(header.size())) {
-      throw InvalidInput(path + ": cannot write (" + errnoText() + ")");
-    }
-    PayloadWriter writer(fd, tmp);
+    writeAll(fd, header, 0, file.display());
+    if (::lseek(fd, static_cast<off_t>(kHeaderBytes), SEEK_SET) < 0) throw IoError(file.display() + ": cannot seek");
+    PayloadWriter writer(fd, file.display());
     writePayload(detector, writer);
 
     header.clear();
@@ -191,29 +268,22 @@ void saveDetector(const LoopDetector& detector, const std::string& path) {
     putRaw(header, writer.size());
     putRaw(header, writer.checksum());
     putRaw(header, crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), header.data(), header.size()));
-    if (::pwrite(fd, header.data(), header.size(), 0) != static_cast<ssize_t>(header.size()) || ::fsync(fd) != 0) {
-      throw InvalidInput(path + ": cannot write (" + errnoText() + ")");
-    }
+    writeAll(fd, header, 0, file.display());
+    if (::fsync(fd) != 0) throw IoError(file.display() + ": cannot flush to disk (" + errnoText() + ")");
   } catch (...) {
+    ::unlinkat(file.folder(), tmp.c_str(), 0);
     ::close(fd);
-    ::unlink(tmp.c_str());
     throw;
   }
-  if (::close(fd) != 0) {
-    ::unlink(tmp.c_str());
-    throw InvalidInput(path + ": cannot write (" + errnoText() + ")");
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+  // Renamed while still locked: the temporary file is never unlocked under its temporary name.
+  if (::renameat(file.folder(), tmp.c_str(), file.folder(), file.name().c_str()) != 0) {
     const std::string why = errnoText();
-    ::unlink(tmp.c_str());
-    throw InvalidInput(path + ": cannot replace the file (" + why + ")");
+    ::unlinkat(file.folder(), tmp.c_str(), 0);
+    ::close(fd);
+    throw IoError(file.display() + ": cannot replace the file (" + why + ")");
   }
-  // The rename itself must reach the disk too.
-  const int dir_fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dir_fd >= 0) {
-    ::fsync(dir_fd);
-    ::close(dir_fd);
-  }
+  ::close(fd);
+  ::fsync(file.folder());  // the rename itself must reach the disk too
 }
 
 DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin) {
@@ -289,20 +359,67 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   return state;
 }
 
-DetectorState readDetectorFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) throw InvalidInput(path + ": cannot read the database file");
-  const std::streamsize size = in.tellg();
-  if (size < 0) throw InvalidInput(path + ": cannot read the database file");
-  std::vector<uint8_t> bytes(static_cast<size_t>(size));
-  in.seekg(0);
-  if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size)) throw InvalidInput(path + ": read error");
-  return parseDetectorState(bytes.data(), bytes.size(), path);
+namespace {
+
+void readExactly(int fd, uint8_t* data, size_t size, off_t offset, const std::string& display) {
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::pread(fd, data + done, size - done, offset + static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw IoError(display + ": read error (" + errnoText() + ")");
+    if (n == 0) throw InvalidInput(display + ": truncated while reading (the file shrank)");
+    done += static_cast<size_t>(n);
+  }
 }
 
-LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session) {
+// Closes the descriptor on every path out.
+struct FdCloser {
+  int fd;
+  ~FdCloser() { ::close(fd); }
+};
+
+}  // namespace
+
+DetectorState readDetectorFile(const std::string& path, unsigned long long max_bytes) {
+  return readDetectorFile(fileAtPath(path), max_bytes);
+}
+
+DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_bytes) {
+  unsigned long long size = 0;
+  const FdCloser fd{file.openForReading(size)};
+  const std::string& origin = file.display();
+  if (size == 0) throw InvalidInput(origin + ": empty file, not a mild_lcd database");
+  // The header first: a huge or sparse file that is not a database costs 32 bytes, not its size.
+  std::vector<uint8_t> header(kHeaderBytes, 0);
+  if (size < kHeaderBytes) throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
+  readExactly(fd.fd, header.data(), kHeaderBytes, 0, origin);
+  if (std::memcmp(header.data(), kMagic, sizeof(kMagic)) != 0) {
+    throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
+  }
+  uint64_t payload_size = 0;
+  std::memcpy(&payload_size, header.data() + 16, sizeof(payload_size));
+  if (payload_size != size - kHeaderBytes) {
+    throw InvalidInput(origin + ": truncated or padded: the header announces " + std::to_string(payload_size) +
+                       " bytes of data, the file holds " + std::to_string(size - kHeaderBytes));
+  }
+  if (size > max_bytes) {
+    throw CapacityError(origin + ": " + std::to_string(size >> 20) + " MB, over the " + std::to_string(max_bytes >> 20) +
+                        " MB allowed (~max_database_mb)");
+  }
+  try {
+    std::vector<uint8_t> bytes(static_cast<size_t>(size));
+    std::memcpy(bytes.data(), header.data(), kHeaderBytes);
+    readExactly(fd.fd, bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes, static_cast<off_t>(kHeaderBytes), origin);
+    return parseDetectorState(bytes.data(), bytes.size(), origin);
+  } catch (const std::bad_alloc&) {
+    throw CapacityError(origin + ": not enough memory to load a database of " + std::to_string(size >> 20) + " MB");
+  }
+}
+
+PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+                         unsigned long long max_bytes) {
   const auto start = std::chrono::steady_clock::now();
-  DetectorState state = readDetectorFile(path);
+  DetectorState state = readDetectorFile(file, max_bytes);
   LoadReport report;
   report.keyframes = state.records.size();
   for (const auto& d : state.descriptors) report.features += d.size();
@@ -317,19 +434,37 @@ LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool co
       differing += (differing.empty() ? "" : ", ") + name + " " + it->second + " -> " + value;
     }
   }
+  std::optional<PreparedRestore> restore;
   try {
-    detector.restore(std::move(state), continue_session);
+    restore.emplace(detector.prepareRestore(std::move(state), continue_session));
   } catch (const InvalidInput& e) {
-    throw InvalidInput(path + ": " + e.what());
+    throw InvalidInput(file.display() + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    throw CapacityError(file.display() + ": not enough memory to rebuild the index of " + std::to_string(report.keyframes) +
+                        " keyframes");
   }
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::ostringstream msg;
   msg.precision(3);
-  msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << path << " in "
-      << report.seconds << " s" << (continue_session ? ", continuing the saved session" : ", as a new session");
+  msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << file.display()
+      << " in " << report.seconds << " s" << (continue_session ? ", continuing the saved session" : ", as a new session");
   if (!differing.empty()) msg << "; index rebuilt with this node's parameters (" << differing << ")";
   report.message = msg.str();
+  return PreparedLoad{std::move(*restore), std::move(report)};
+}
+
+void commitLoad(LoopDetector& detector, PreparedLoad&& prepared) { detector.commitRestore(std::move(prepared.restore)); }
+
+LoadReport loadDetector(LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+                        unsigned long long max_bytes) {
+  PreparedLoad prepared = prepareLoad(detector, file, continue_session, max_bytes);
+  LoadReport report = prepared.report;
+  commitLoad(detector, std::move(prepared));
   return report;
+}
+
+LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session) {
+  return loadDetector(detector, fileAtPath(path), continue_session);
 }
 
 }  // namespace mild

@@ -1,7 +1,9 @@
 #include "mild_lcd/evaluation.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -10,7 +12,11 @@
 
 namespace mild {
 
-GroundTruth loadGroundTruth(const std::string& path) {
+GroundTruth loadGroundTruth(const std::string& path, long frames) {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) {
+    throw InvalidInput(path + ": not a ground-truth file (missing, or not a regular file)");
+  }
   std::ifstream in(path);
   if (!in) throw InvalidInput(path + ": cannot open the ground-truth file");
   GroundTruth gt;
@@ -29,6 +35,11 @@ GroundTruth loadGroundTruth(const std::string& path) {
       throw InvalidInput(path + ":" + std::to_string(number) + ": expected 'i j overlap is_true' (is_true 0 or 1), got '" +
                          line + "'");
     }
+    if (j < 0 || i <= j || i > INT32_MAX || (frames >= 0 && i >= frames)) {
+      throw InvalidInput(path + ":" + std::to_string(number) + ": frame pair " + std::to_string(i) + " " + std::to_string(j) +
+                         (frames >= 0 ? " is not 0 <= j < i < " + std::to_string(frames) + " (the sequence's frames)"
+                                      : " is not 0 <= j < i"));
+    }
     const std::pair<int, int> pair(static_cast<int>(i), static_cast<int>(j));
     if (is_true == "1") {
       gt.right.insert(pair);
@@ -38,6 +49,7 @@ GroundTruth loadGroundTruth(const std::string& path) {
     }
   }
   if (in.bad()) throw InvalidInput(path + ": read error");
+  if (gt.right.empty() && gt.dont_care.empty()) throw InvalidInput(path + ": holds no frame pairs (empty ground truth)");
   return gt;
 }
 

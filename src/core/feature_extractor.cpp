@@ -21,6 +21,33 @@ int channelsOf(PixelFormat f) {
   return 0;
 }
 
+// OpenCV's ORB keeps every keypoint that ties with the weakest one it retains, so a tiled texture
+// (thousands of equal responses) yields many times num_features. Keep exactly the strongest
+// `limit`, ties broken by position so that the choice is deterministic.
+void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, size_t limit) {
+  if (keypoints.size() <= limit) return;
+  std::vector<int> order(keypoints.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    const cv::KeyPoint& ka = keypoints[a];
+    const cv::KeyPoint& kb = keypoints[b];
+    if (ka.response != kb.response) return ka.response > kb.response;
+    if (ka.octave != kb.octave) return ka.octave < kb.octave;
+    if (ka.pt.y != kb.pt.y) return ka.pt.y < kb.pt.y;
+    return ka.pt.x < kb.pt.x;
+  });
+  order.resize(limit);
+  std::sort(order.begin(), order.end());  // keep OpenCV's order among the survivors
+  std::vector<cv::KeyPoint> kept;
+  cv::Mat rows(static_cast<int>(limit), descriptors.cols, descriptors.type());
+  for (size_t i = 0; i < limit; ++i) {
+    kept.push_back(keypoints[order[i]]);
+    descriptors.row(order[i]).copyTo(rows.row(static_cast<int>(i)));
+  }
+  keypoints = std::move(kept);
+  descriptors = rows;
+}
+
 }  // namespace
 
 void OrbParams::validate() const {
@@ -78,8 +105,9 @@ Features OrbExtractor::extract(const cv::Mat& image, PixelFormat format) const {
     throw InvalidInput("ORB cannot process a " + std::to_string(gray.cols) + " x " + std::to_string(gray.rows) +
                        " image with these orb/ parameters: " + e.err);
   }
+  if (descriptors.rows != static_cast<int>(out.keypoints.size())) return Features{};
+  keepStrongest(out.keypoints, descriptors, static_cast<size_t>(params_.num_features));
   out.descriptors = descriptorsFromMat(descriptors);
-  if (out.descriptors.size() != out.keypoints.size()) out.keypoints.clear(), out.descriptors.clear();
   return out;
 }
 

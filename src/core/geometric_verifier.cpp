@@ -82,7 +82,11 @@ GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, co
   }
   out.inlier_mask.assign(mask.begin<uint8_t>(), mask.end<uint8_t>());
   int inliers = 0;
-  for (uint8_t v : out.inlier_mask) inliers += v ? 1 : 0;
+  for (size_t i = 0; i < out.inlier_mask.size(); ++i) {
+    if (!out.inlier_mask[i]) continue;
+    ++inliers;
+    out.verification.inlier_matches.push_back(out.matches[i]);
+  }
   out.verification.inliers = inliers;
   out.verification.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(out.matches.size());
   out.verification.verified = inliers >= params_.min_inliers;

@@ -56,6 +56,10 @@ void LoopDetector::reset() {
 }
 
 void LoopDetector::restore(DetectorState state, bool continue_session) {
+  commitRestore(prepareRestore(std::move(state), continue_session));
+}
+
+PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_session) const {
   const size_t n = state.records.size();
   if (state.descriptors.size() != n) throw InvalidInput("state has " + std::to_string(n) + " keyframes but " +
                                                        std::to_string(state.descriptors.size()) + " descriptor lists");
@@ -69,6 +73,7 @@ void LoopDetector::restore(DetectorState state, bool continue_session) {
                          " keypoints but " + std::to_string(state.descriptors[k].size()) + " descriptors");
     }
     if (!std::isfinite(r.stamp)) throw InvalidInput("keyframe " + std::to_string(r.id) + " has a non-finite stamp");
+    if (r.id > kMaxKeyframeId) throw InvalidInput("keyframe id " + std::to_string(r.id) + " is above the largest id");
     if (!index_of_id.emplace(r.id, static_cast<KeyframeIndex>(k)).second) {
       throw InvalidInput("keyframe id " + std::to_string(r.id) + " appears twice");
     }
@@ -83,13 +88,18 @@ void LoopDetector::restore(DetectorState state, bool continue_session) {
     if (state.posterior.size() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
     filter.setState(std::move(state.posterior), state.no_loop);
   }
-  // Nothing can fail from here on.
-  database_ = std::move(database);
-  filter_ = std::move(filter);
-  records_ = std::move(state.records);
-  index_of_id_ = std::move(index_of_id);
-  next_id_ = state.next_id;
-  session_start_ = continue_session ? state.session_start : static_cast<KeyframeIndex>(n);
+  return PreparedRestore{std::move(database), std::move(filter), std::move(state.records), std::move(index_of_id),
+                         state.next_id,
+                         continue_session ? state.session_start : static_cast<KeyframeIndex>(n)};
+}
+
+void LoopDetector::commitRestore(PreparedRestore&& prepared) {
+  database_ = std::move(prepared.database);
+  filter_ = std::move(prepared.filter);
+  records_ = std::move(prepared.records);
+  index_of_id_ = std::move(prepared.index_of_id);
+  next_id_ = prepared.next_id;
+  session_start_ = prepared.session_start;
 }
 
 std::optional<KeyframeIndex> LoopDetector::find(uint64_t id) const {
@@ -126,8 +136,19 @@ KeyframeIndex LoopDetector::eligibleCount(double stamp) const {
   return static_cast<KeyframeIndex>(limit);
 }
 
+void LoopDetector::checkId(std::optional<uint64_t> id) const {
+  if (id) {
+    if (*id > kMaxKeyframeId) {
+      throw InvalidInput("keyframe id " + std::to_string(*id) + " is too large (ids must be below 2^64 - 1)");
+    }
+    if (index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+  } else if (next_id_ > kMaxKeyframeId) {
+    throw CapacityError("no keyframe id left to assign (the largest id in use is 2^64 - 2): give ids explicitly");
+  }
+}
+
 DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp, std::optional<uint64_t> id) {
-  if (id && index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+  checkId(id);
   const auto start = Clock::now();
   Features features = extractor_.extract(image, format);
   const double extract_ms = msSince(start);
@@ -141,7 +162,8 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
     throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
                        std::to_string(features.descriptors.size()) + " descriptors");
   }
-  if (id && index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+  checkId(id);
+  if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
   DetectionResult result;
   result.query_id = id ? *id : next_id_;
   result.stats.features = features.descriptors.size();

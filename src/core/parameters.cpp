@@ -1,6 +1,7 @@
 #include "mild_lcd/parameters.hpp"
 
 #include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <sstream>
@@ -147,6 +148,10 @@ YamlParameterSource YamlParameterSource::fromString(const std::string& yaml, con
 }
 
 YamlParameterSource YamlParameterSource::fromFile(const std::string& path) {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) {
+    throw InvalidInput(path + ": not a parameter file (missing, or not a regular file)");
+  }
   std::ifstream in(path);
   if (!in) throw InvalidInput(path + ": cannot read the file");
   std::ostringstream text;

@@ -42,12 +42,61 @@ cv::Mat wrap(const sensor_msgs::Image& msg, int type) {
                  msg.step);
 }
 
+void refuseLargerThan(uint64_t width, uint64_t height, uint64_t max_pixels, const char* what) {
+  if (width * height > max_pixels) {
+    throw mild::InvalidInput(std::string(what) + " of " + std::to_string(width) + " x " + std::to_string(height) +
+                             " pixels is larger than ~max_image_pixels (" + std::to_string(max_pixels) + ")");
+  }
+}
+
+uint32_t bigEndian(const uint8_t* p, int bytes) {
+  uint32_t v = 0;
+  for (int i = 0; i < bytes; ++i) v = (v << 8) | p[i];
+  return v;
+}
+
 }  // namespace
 
-DecodedImage imageFromMsg(const sensor_msgs::Image& msg) {
+std::optional<cv::Size> compressedImageSize(const std::vector<uint8_t>& data) {
+  const size_t n = data.size();
+  const uint8_t* d = data.data();
+  static constexpr uint8_t kPng[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  if (n >= 24 && std::equal(kPng, kPng + 8, d) && std::equal(d + 12, d + 16, "IHDR")) {
+    const uint32_t w = bigEndian(d + 16, 4), h = bigEndian(d + 20, 4);
+    if (w > INT32_MAX || h > INT32_MAX) return cv::Size(INT32_MAX, INT32_MAX);
+    return cv::Size(static_cast<int>(w), static_cast<int>(h));
+  }
+  if (n >= 4 && d[0] == 0xFF && d[1] == 0xD8) {  // JPEG: walk the markers to the frame header
+    size_t pos = 2;
+    while (pos + 4 <= n) {
+      if (d[pos] != 0xFF) return std::nullopt;
+      const uint8_t marker = d[pos + 1];
+      if (marker == 0xFF) {  // fill byte
+        ++pos;
+        continue;
+      }
+      if (marker == 0x01 || (marker >= 0xD0 && marker <= 0xD9)) {  // no length field
+        pos += 2;
+        continue;
+      }
+      const size_t length = bigEndian(d + pos + 2, 2);
+      const bool frame_header = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+      if (frame_header) {
+        if (pos + 9 > n) return std::nullopt;
+        return cv::Size(static_cast<int>(bigEndian(d + pos + 7, 2)), static_cast<int>(bigEndian(d + pos + 5, 2)));
+      }
+      if (length < 2) return std::nullopt;
+      pos += 2 + length;
+    }
+  }
+  return std::nullopt;
+}
+
+DecodedImage imageFromMsg(const sensor_msgs::Image& msg, uint64_t max_pixels) {
   if (msg.width == 0 || msg.height == 0) {
     throw mild::InvalidInput("empty image (" + std::to_string(msg.width) + " x " + std::to_string(msg.height) + ")");
   }
+  refuseLargerThan(msg.width, msg.height, max_pixels, "image");
   for (const Layout& l : kDirect) {
     if (msg.encoding == l.encoding) return DecodedImage{wrap(msg, l.type), l.format};
   }
@@ -61,8 +110,14 @@ DecodedImage imageFromMsg(const sensor_msgs::Image& msg) {
                            "' (accepted: mono8, mono16, bgr8, rgb8, bgra8, rgba8)");
 }
 
-DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg) {
+DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg, uint64_t max_pixels) {
   if (msg.data.empty()) throw mild::InvalidInput("empty compressed image");
+  // The header's size, before a decoder allocates for it: 500 bytes may claim 20000 x 20000 pixels.
+  if (const auto size = compressedImageSize(msg.data)) {
+    if (size->width <= 0 || size->height <= 0) throw mild::InvalidInput("compressed image declares no pixels");
+    refuseLargerThan(static_cast<uint64_t>(size->width), static_cast<uint64_t>(size->height), max_pixels,
+                     "compressed image");
+  }
   cv::Mat decoded;
   try {
     decoded = cv::imdecode(msg.data, cv::IMREAD_UNCHANGED);
@@ -70,6 +125,7 @@ DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg) {
     decoded.release();
   }
   if (decoded.empty()) throw mild::InvalidInput("compressed image (format '" + msg.format + "') cannot be decoded");
+  refuseLargerThan(static_cast<uint64_t>(decoded.cols), static_cast<uint64_t>(decoded.rows), max_pixels, "decoded image");
   if (decoded.depth() == CV_16U) decoded.convertTo(decoded, CV_8U, 1.0 / 256.0);
   switch (decoded.channels()) {
     case 1: return DecodedImage{decoded, mild::PixelFormat::kGray};
@@ -102,6 +158,14 @@ std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& 
   return out;
 }
 
+ros::Time stampOf(double seconds) {
+  // ros::Time holds unsigned 32-bit seconds; a stamp outside (a keyframe given time 0, or a file
+  // from elsewhere) is clamped rather than thrown at the publisher.
+  if (!(seconds > 0.0)) return ros::Time(0, 0);
+  if (seconds >= 4294967295.0) return ros::Time(4294967295u, 0);
+  return ros::Time(seconds);
+}
+
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
   mild::Features f;
   f.descriptors = mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
@@ -111,7 +175,7 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
 }
 
 mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
-                                       size_t database_size, const std::function<double(uint64_t)>& stamp_of) {
+                                       size_t database_size) {
   mild_lcd::LoopClosure msg;
   msg.header = header;
   msg.query_id = result.query_id;
@@ -124,7 +188,7 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
   for (const mild::LoopCandidate& c : result.candidates) {
     mild_lcd::LoopCandidate m;
     m.id = c.id;
-    m.stamp = ros::Time(std::max(0.0, stamp_of(c.id)));
+    m.stamp = stampOf(c.stamp);
     m.probability = c.probability;
     m.similarity = c.similarity;
     m.verified = c.verification.verified;
@@ -139,8 +203,13 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
 namespace {
 
 mild::Features requestSide(const std::vector<uint8_t>& descriptors, const std::vector<mild_lcd::KeyPoint>& keypoints,
-                           const char* side) {
+                           const char* side, size_t max_features) {
   if (descriptors.empty()) throw mild::InvalidInput(std::string(side) + "_descriptors is empty");
+  if (descriptors.size() / mild::kDescriptorBytes > max_features || keypoints.size() > max_features) {
+    throw mild::CapacityError(std::string(side) + " side has " +
+                              std::to_string(std::max(descriptors.size() / mild::kDescriptorBytes, keypoints.size())) +
+                              " features, more than ~max_match_features (" + std::to_string(max_features) + ")");
+  }
   mild::Features f;
   try {
     f.descriptors = mild::descriptorsFromBytes(descriptors.data(), descriptors.size(),
@@ -155,13 +224,13 @@ mild::Features requestSide(const std::vector<uint8_t>& descriptors, const std::v
 }  // namespace
 
 mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request& request, const StoredFeatures& stored,
-                                            const mild::GeometricVerifier& verifier) {
+                                            const mild::GeometricVerifier& verifier, size_t max_features) {
   mild_lcd::SparseMatch::Response response;
   try {
     mild::Features query, train;
     if (request.use_descriptors) {
-      query = requestSide(request.query_descriptors, request.query_keypoints, "query");
-      train = requestSide(request.train_descriptors, request.train_keypoints, "train");
+      query = requestSide(request.query_descriptors, request.query_keypoints, "query", max_features);
+      train = requestSide(request.train_descriptors, request.train_keypoints, "train", max_features);
     } else {
       if (!request.query_descriptors.empty() || !request.train_descriptors.empty()) {
         throw mild::InvalidInput("descriptors were given but use_descriptors is false: set it to match them, "
@@ -203,7 +272,7 @@ mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request
                        (with_geometry ? ", " + std::to_string(response.inliers) + " inliers" +
                                             (response.verified ? " (verified)" : " (not verified)")
                                       : " (no keypoints: no geometric check)");
-  } catch (const mild::InvalidInput& e) {
+  } catch (const mild::Error& e) {
     response = mild_lcd::SparseMatch::Response();
     response.success = false;
     response.message = e.what();

@@ -68,7 +68,7 @@ int run(const Options& opt) {
   }
   const mild::tools::ImageSequence seq = mild::tools::openImageSequence(opt.images, opt.fps);
   std::optional<mild::GroundTruth> truth;
-  if (!opt.gt.empty()) truth = mild::loadGroundTruth(opt.gt);  // fail before the long run, not after
+  if (!opt.gt.empty()) truth = mild::loadGroundTruth(opt.gt, static_cast<long>(seq.frames.size()));  // fail before the long run, not after
   for (const auto& f : seq.ignored) std::cerr << "note: ignoring non-image file " << f << "\n";
 
   std::ofstream csv(opt.output);

@@ -170,7 +170,7 @@ TEST_F(DatabaseFile, BadFilesAreClearErrorsAndLeaveTheDetectorAsItWas) {
   header[9] ^= 1;  // the version, without fixing the header checksum
   expectRejected(header, "corrupt header");
   expectRejected(std::vector<uint8_t>(5000, 0xAB), "not a mild_lcd database");
-  EXPECT_THROW(loadDetector(running, path("missing.mild"), true), InvalidInput);
+  EXPECT_THROW(loadDetector(running, path("missing.mild"), true), IoError);
 
   // The running detector still works and still owns its keyframes.
   EXPECT_EQ(running.process(fixtureFrames()[31], PixelFormat::kGray, 15.5).query_id, next_before);
@@ -213,7 +213,7 @@ TEST_F(DatabaseFile, OtherIndexParametersRebuildTheIndexAndSaySo) {
 TEST_F(DatabaseFile, SavingIntoAMissingFolderFailsAndKeepsNothingHalfWritten) {
   LoopDetector source(fixtureParams());
   process(source, 0, 3);
-  EXPECT_THROW(saveDetector(source, path("no/such/folder/map.mild")), InvalidInput);
+  EXPECT_THROW(saveDetector(source, path("no/such/folder/map.mild")), IoError);
   saveDetector(source, path("map.mild"));
   size_t files = 0;
   for (const auto& e : fs::directory_iterator(dir_)) files += e.is_regular_file() ? 1 : 0;

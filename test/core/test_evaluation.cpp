@@ -95,6 +95,17 @@ TEST(Evaluation, MalformedGroundTruthNamesFileAndLine) {
   std::ofstream(path) << "10 0 0.5 7\n";
   EXPECT_THROW(loadGroundTruth(path.string()), InvalidInput);
   EXPECT_THROW(loadGroundTruth("/nonexistent/gt_loops.txt"), InvalidInput);
+  // Pairs that cannot be frames of the sequence, and a file without pairs, are errors too.
+  for (const char* line : {"10 -1 0.5 1\n", "5 9 0.5 1\n", "7 7 0.5 0\n"}) {
+    std::ofstream(path) << line;
+    EXPECT_THROW(loadGroundTruth(path.string()), InvalidInput) << line;
+  }
+  std::ofstream(path) << "90 10 0.5 1\n";
+  EXPECT_NO_THROW(loadGroundTruth(path.string(), 91));
+  EXPECT_THROW(loadGroundTruth(path.string(), 90), InvalidInput) << "frame 90 of a 90-frame sequence";
+  std::ofstream(path) << "# only a comment\n\n";
+  EXPECT_THROW(loadGroundTruth(path.string()), InvalidInput);
+  EXPECT_THROW(loadGroundTruth(fs::temp_directory_path().string()), InvalidInput) << "a folder";
   EXPECT_THROW(loadCandidates("/nonexistent/candidates.csv"), InvalidInput);
 }
 

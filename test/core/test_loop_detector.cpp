@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include <filesystem>
 #include <set>
 
@@ -129,6 +131,40 @@ TEST(LoopDetector, KeepsGivenIdsAndAssignsTheNextFreeOne) {
   EXPECT_EQ(*detector.find(1000), 1u);
   EXPECT_FALSE(detector.find(5));
   EXPECT_EQ(detector.record(2).id, 1001u);
+}
+
+// An id the database could not continue from (next id = largest + 1) is refused at input, so a
+// saved map can always be loaded again.
+TEST(LoopDetector, IdsItCannotContinueFromAreRefusedAtInput) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  LoopDetector detector(fixtureParams());
+  EXPECT_THROW(detector.process(frames[0], PixelFormat::kGray, 0.0, UINT64_MAX), InvalidInput);
+  EXPECT_EQ(detector.size(), 0u);
+  EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0, kMaxKeyframeId).query_id, kMaxKeyframeId);
+  EXPECT_THROW(detector.process(frames[1], PixelFormat::kGray, 1.0), CapacityError) << "no id left to assign";
+  EXPECT_EQ(detector.process(frames[1], PixelFormat::kGray, 1.0, 7).query_id, 7u) << "given ids still work";
+  EXPECT_EQ(detector.size(), 2u);
+  EXPECT_THROW(detector.process(frames[2], PixelFormat::kGray, std::nan(""), 8), InvalidInput);
+  EXPECT_EQ(detector.size(), 2u);
+}
+
+// OpenCV's ORB keeps every keypoint tied with the weakest it retains: on a tiled texture that was
+// thousands over orb/num_features.
+TEST(LoopDetector, ATiledTextureYieldsAtMostNumFeatures) {
+  cv::Mat tile(16, 16, CV_8UC1);
+  cv::randu(tile, 0, 256);
+  cv::Mat tiled;
+  cv::repeat(tile, 40, 40, tiled);  // 640 x 640 of one 16-pixel tile
+  DetectorParams p = fixtureParams();
+  p.orb.num_features = 800;
+  LoopDetector detector(p);
+  const DetectionResult r = detector.process(tiled, PixelFormat::kGray, 0.0);
+  EXPECT_LE(r.stats.features, 800u);
+  EXPECT_GT(r.stats.features, 400u) << "the cap keeps the strongest, not fewer";
+  // Deterministic: the same image keeps the same features.
+  LoopDetector again(p);
+  EXPECT_EQ(again.process(tiled, PixelFormat::kGray, 0.0).stats.features, r.stats.features);
+  EXPECT_EQ(again.features(0).descriptors, detector.features(0).descriptors);
 }
 
 TEST(LoopDetector, ExcludesRecentKeyframesByCountAndByTime) {

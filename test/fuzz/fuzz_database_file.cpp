@@ -26,7 +26,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     features.keypoints.resize(2);
     features.descriptors.resize(2);
     detector.process(features, 1e9);
-  } catch (const mild::InvalidInput&) {
+  } catch (const mild::Error&) {
   }
   return 0;
 }

@@ -59,7 +59,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const mild_lcd::DecodedImage image = mild_lcd::imageFromMsg(msg);
       detector().process(image.image, image.format, 0.0);
     }
-  } catch (const mild::InvalidInput&) {
+  } catch (const mild::Error&) {
   }
   return 0;
 }

@@ -18,7 +18,11 @@
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
+#include <nodelet/NodeletList.h>
 #include <std_srvs/Trigger.h>
+
+#include <atomic>
+#include <thread>
 
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoopClosure.h"
@@ -287,16 +291,25 @@ TEST(BadInput, IsRejectedAndCountedAndLaterKeyframesAreStillProcessed) {
   mismatch.keypoints.resize(2);
   mismatch.descriptors.assign(33, 0);
   keyframes.publish(mismatch);
-  ros::WallDuration(0.5).sleep();  // the four are queued before the good one
+  ros::WallDuration(0.5).sleep();  // the four are queued before the good ones
   images.publish(fixtureImage(0, 5000.0));
+  sensor_msgs::Image one_pixel;  // thinner than ORB's border: a keyframe without features, answered
+  one_pixel.header.stamp = ros::Time(5001.0);
+  one_pixel.width = one_pixel.height = 1;
+  one_pixel.encoding = "mono8";
+  one_pixel.step = 1;
+  one_pixel.data.assign(1, 128);
+  images.publish(one_pixel);
 
-  ASSERT_TRUE(outputs.waitForCount(1, 30.0)) << "the good keyframe after the bad ones was not processed";
+  ASSERT_TRUE(outputs.waitForCount(2, 30.0)) << "the good keyframes after the bad ones were not processed";
   ros::WallDuration(0.5).sleep();
   const auto msgs = outputs.messages();
-  ASSERT_EQ(msgs.size(), 1u) << "a rejected keyframe must not be answered";
+  ASSERT_EQ(msgs.size(), 2u) << "a rejected keyframe must not be answered";
   EXPECT_EQ(msgs[0].query_id, kFixtureFrames + idOffset()) << "ids continue after the rejected keyframes";
   EXPECT_EQ(msgs[0].database_size, static_cast<int>(kFixtureFrames + 1));
   EXPECT_NEAR(msgs[0].header.stamp.toSec(), 5000.0, 1e-6);
+  EXPECT_EQ(msgs[1].features, 0);
+  EXPECT_EQ(msgs[1].database_size, static_cast<int>(kFixtureFrames + 2)) << "stored, answered, not rejected";
   const int expected = std::stoi(rejected_before.empty() ? "0" : rejected_before) + 4;
   EXPECT_EQ(diagnosticValue("rejected keyframes", std::to_string(expected), 10.0), std::to_string(expected));
 }
@@ -429,6 +442,85 @@ TEST(StartUp, InvalidParameterIsRejectedNamingIt) {
   const auto typo = mild::test::runCommand(node + " __name:=typo_lcd __ns:=/typo _filter/loop_persistance:=0.9");
   EXPECT_NE(typo.status, 0) << typo.output;
   EXPECT_NE(typo.output.find("loop_persistance"), std::string::npos) << typo.output;
+
+  // The node's own settings are checked the same way: a misspelt name, a string for a boolean.
+  const auto node_typo = mild::test::runCommand(node + " __name:=typo2_lcd __ns:=/typo2 _queue_sise:=10");
+  EXPECT_NE(node_typo.status, 0) << node_typo.output;
+  EXPECT_NE(node_typo.status, 124) << node_typo.output;
+  EXPECT_NE(node_typo.output.find("queue_sise"), std::string::npos) << node_typo.output;
+  const auto string_bool =
+      mild::test::runCommand(node + " __name:=str_lcd __ns:=/str _save_on_shutdown:='\"true\"' _database_path:=/tmp/x.db");
+  EXPECT_NE(string_bool.status, 0) << string_bool.output;
+  EXPECT_NE(string_bool.status, 124) << string_bool.output;
+  EXPECT_NE(string_bool.output.find("save_on_shutdown"), std::string::npos) << string_bool.output;
+  EXPECT_NE(string_bool.output.find("true or false"), std::string::npos) << string_bool.output;
+}
+
+// ---------------------------------------------------------------------------------------------
+// A nodelet that cannot start leaves its manager running (nodelet_startup.test).
+
+TEST(StartUpFailure, ABogusTransportLeavesTheManagerAlive) {
+  // The launch file loaded a mild_lcd nodelet with image_transport "bogus" into /manager.
+  ros::WallDuration(3.0).sleep();  // the failed load has had time to crash anything it would crash
+  nodelet::NodeletList list;
+  ASSERT_TRUE(ros::service::waitForService("/manager/list", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::call("/manager/list", list)) << "the manager died";
+  for (const auto& name : list.response.nodelets) EXPECT_EQ(name.find("bogus"), std::string::npos) << name;
+  const std::string loaded = privateParam("good_nodelet");
+  EXPECT_NE(std::find(list.response.nodelets.begin(), list.response.nodelets.end(), loaded), list.response.nodelets.end())
+      << "the good nodelet in the same manager keeps running";
+}
+
+// ---------------------------------------------------------------------------------------------
+// Long service requests never cost keyframes (nodelet_hostile.test).
+
+TEST(ServiceLoad, KeyframesArriveWhileSparseMatchIsBusyAndEveryOneIsCounted) {
+  ros::NodeHandle nh;
+  ros::Publisher images = nh.advertise<sensor_msgs::Image>("/camera/image", 1000);
+  TopicLog<mild_lcd::LoopClosure> outputs("loop_closure", 1000);
+  ASSERT_TRUE(outputs.waitForPublisher(20.0));
+  ASSERT_TRUE(waitForSubscriber(images, 20.0));
+
+  // The largest request the node accepts, over and over, from a thread of its own.
+  mild_lcd::SparseMatch::Request big;
+  big.use_descriptors = true;
+  cv::RNG rng(5);
+  big.query_descriptors.resize(10000 * 32);
+  for (auto& b : big.query_descriptors) b = static_cast<uint8_t>(rng.uniform(0, 256));
+  big.train_descriptors = big.query_descriptors;
+  std::atomic<bool> stop{false};
+  std::atomic<int> calls{0};
+  // Two callers: as many as a nodelet manager has threads by default on this machine.
+  const auto call_repeatedly = [&] {
+    while (!stop) {
+      mild_lcd::SparseMatch srv;
+      srv.request = big;
+      if (ros::service::call("sparse_match", srv) && srv.response.success) ++calls;
+    }
+  };
+  std::thread load(call_repeatedly), load2(call_repeatedly);
+  constexpr int kKeyframes = 300;
+  for (int i = 0; i < kKeyframes; ++i) {
+    images.publish(fixtureImage(static_cast<size_t>(i) % kFixtureFrames, 9000.0 + 0.1 * i));
+    ros::WallDuration(0.01).sleep();
+  }
+  outputs.waitForCount(kKeyframes, 120.0);
+  stop = true;
+  load.join();
+  load2.join();
+  EXPECT_GT(calls.load(), 0) << "the service answered meanwhile";
+  const int answered = static_cast<int>(outputs.size());
+  const int dropped = std::stoi(diagnosticValue("dropped keyframes", "(latest)", 2.0));
+  const int rejected = std::stoi(diagnosticValue("rejected keyframes", "(latest)", 2.0));
+  EXPECT_EQ(answered + dropped + rejected, kKeyframes) << answered << " answered, " << dropped << " dropped, " << rejected
+                                                       << " rejected";
+  EXPECT_EQ(answered, kKeyframes) << "the queue (300) holds them all: none needs dropping";
+
+  mild_lcd::SparseMatch::Request huge = big;  // over ~max_match_features (10,000)
+  huge.query_descriptors.insert(huge.query_descriptors.end(), big.query_descriptors.begin(), big.query_descriptors.end());
+  const auto refused = callSparseMatch(huge);
+  EXPECT_FALSE(refused.success);
+  EXPECT_NE(refused.message.find("max_match_features"), std::string::npos) << refused.message;
 }
 
 }  // namespace

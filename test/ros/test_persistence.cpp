@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -34,9 +36,11 @@ namespace {
 
 const std::string kFixtureDir = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
 
+// The nodelet's ~database_dir (nodelet_persistence.test sets the same folder).
 fs::path scratch() {
   static const fs::path dir = [] {
-    const fs::path d = fs::temp_directory_path() / ("mild_persistence_" + std::to_string(::getpid()));
+    const char* home = std::getenv("ROS_HOME");
+    const fs::path d = fs::path(home && *home ? home : "/tmp") / "mild_persistence_test";
     fs::create_directories(d);
     return d;
   }();
@@ -122,8 +126,34 @@ TEST(Persistence, SaveResetLoadAndDetectLoopsAgainstTheLoadedMap) {
   EXPECT_FALSE(refused.response.success);
   EXPECT_NE(refused.response.message.find("truncated"), std::string::npos) << refused.response.message;
   EXPECT_EQ(refused.response.keyframes, 60u);
-  save.path = (scratch() / "no" / "such" / "dir.mild").string();
-  EXPECT_FALSE(call<mild_lcd::SaveDatabase>("save_database", save).response.success);
+  // Only inside ~database_dir, never through a link, never over something that is not a file.
+  std::ofstream(scratch().parent_path() / "victim.txt") << "precious";
+  fs::remove(scratch() / "link.mild");
+  fs::create_symlink(scratch().parent_path() / "victim.txt", scratch() / "link.mild");
+  for (const std::string& bad : {std::string("../victim.txt"), (scratch().parent_path() / "victim.txt").string(),
+                                 std::string("link.mild"), std::string("/dev/null")}) {
+    save.path = bad;
+    const auto refused_save = call<mild_lcd::SaveDatabase>("save_database", save);
+    EXPECT_FALSE(refused_save.response.success) << bad;
+    EXPECT_FALSE(refused_save.response.message.empty()) << bad;
+  }
+  std::ifstream victim(scratch().parent_path() / "victim.txt");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(victim)), std::istreambuf_iterator<char>()), "precious");
+  save.path = "sites/corridor.mild";  // a sub-folder inside is made
+  EXPECT_TRUE(call<mild_lcd::SaveDatabase>("save_database", save).response.success);
+  EXPECT_TRUE(fs::exists(scratch() / "sites" / "corridor.mild"));
+
+  // Loading a FIFO or a folder answers at once, success false; the database is unchanged.
+  fs::remove(scratch() / "fifo.mild");
+  ASSERT_EQ(mkfifo((scratch() / "fifo.mild").c_str(), 0600), 0);
+  fs::create_directories(scratch() / "folder.mild");
+  for (const std::string& bad : {std::string("fifo.mild"), std::string("folder.mild")}) {
+    load.path = bad;
+    const auto answer = call<mild_lcd::LoadDatabase>("load_database", load);
+    EXPECT_FALSE(answer.response.success) << bad;
+    EXPECT_NE(answer.response.message.find("regular files"), std::string::npos) << answer.response.message;
+    EXPECT_EQ(answer.response.keyframes, 60u);
+  }
 }
 
 // A node of our own in /session: started with ~load_on_start on the map saved above, fed one
@@ -166,18 +196,97 @@ TEST(Persistence, LoadOnStartAndSaveOnShutdown) {
   waitpid(node, &status, 0);
   EXPECT_EQ(mild::readDetectorFile(map).records.size(), stored + 1) << "saved on shutdown";
 
-  // A corrupt map at start-up stops the node, naming the file, rather than starting empty and
-  // overwriting it on shutdown.
-  const std::string corrupt = (scratch() / "corrupt_start.mild").string();
-  std::ofstream(corrupt) << "definitely not a database";
-  const auto run = mild::test::runCommand(std::string("timeout 30 ") + MILD_NODE_BIN + " __ns:=/broken_map __name:=mild_lcd "
-                                          "_database_path:=" + corrupt +
-                                          " _load_on_start:=true _save_on_shutdown:=true _use_image_input:=false");
-  EXPECT_NE(run.status, 0);
-  EXPECT_NE(run.status, 124) << "kept running on a corrupt map";
-  EXPECT_NE(run.output.find(corrupt), std::string::npos) << run.output;
-  EXPECT_EQ(fs::file_size(corrupt), std::string("definitely not a database").size()) << "the file is left for inspection";
   fs::remove_all(scratch());
+}
+
+// A corrupt map at start-up: the node says why (naming the file), refuses keyframes rather than
+// learning a new map on nothing, and does not write over the file when it stops.
+TEST(Persistence, AMapThatFailsToLoadAtStartUpIsNeverOverwritten) {
+  fs::create_directories(scratch());
+  const std::string corrupt = (scratch() / "corrupt_start.mild").string();
+  const std::string text = "definitely not a database";
+  std::ofstream(corrupt) << text;
+  const std::string log = (scratch() / "broken_map.log").string();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const std::string path_arg = "_database_path:=" + corrupt;
+    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    dup2(fd, 1);
+    dup2(fd, 2);
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/broken_map", "__name:=mild_lcd", path_arg.c_str(), "_load_on_start:=true",
+          "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  {
+    ros::NodeHandle nh;
+    ros::Publisher keyframes = nh.advertise<mild_lcd::Keyframe>("/broken_map/keyframe", 10);
+    TopicLog<mild_lcd::LoopClosure> outputs("/broken_map/loop_closure");
+    ASSERT_TRUE(outputs.waitForPublisher(30.0));
+    ASSERT_TRUE(waitForSubscriber(keyframes, 30.0));
+    mild_lcd::Keyframe kf;
+    kf.keypoints.resize(1);
+    kf.descriptors.assign(32, 0x3C);
+    for (int i = 0; i < 3; ++i) keyframes.publish(kf);
+    ros::WallDuration(2.0).sleep();
+    EXPECT_EQ(outputs.size(), 0u) << "keyframes are refused while the start-up map is not loaded";
+    mild_lcd::SaveDatabase::Request save;
+    const auto saved = call<mild_lcd::SaveDatabase>("/broken_map/save_database", save);
+    EXPECT_FALSE(saved.response.success) << "nor saved through the service";
+  }
+  kill(pid, SIGINT);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  std::ifstream in(log);
+  const std::string output((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(output.find(corrupt), std::string::npos) << output;
+  EXPECT_NE(output.find("not a mild_lcd database"), std::string::npos) << output;
+  EXPECT_NE(output.find("not saving on shutdown"), std::string::npos) << output;
+  EXPECT_EQ(fs::file_size(corrupt), text.size()) << "the file is left for inspection";
+}
+
+// SIGINT with a long queue: what waits is dropped (counted, logged), what was processed is saved,
+// well inside the 15 s roslaunch gives a node before it escalates to SIGTERM.
+TEST(Persistence, ShutdownWithAFullQueueSavesWhatWasProcessedInTime) {
+  fs::create_directories(scratch());
+  const std::string map = (scratch() / "busy.mild").string();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const std::string path_arg = "_database_path:=" + map;
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/busy", "__name:=mild_lcd", path_arg.c_str(), "_save_on_shutdown:=true",
+          "_use_image_input:=false", "_queue_size:=5000", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  size_t answered = 0;
+  {
+    ros::NodeHandle nh;
+    ros::Publisher keyframes = nh.advertise<mild_lcd::Keyframe>("/busy/keyframe", 5000);
+    TopicLog<mild_lcd::LoopClosure> outputs("/busy/loop_closure", 5000);
+    ASSERT_TRUE(outputs.waitForPublisher(30.0));
+    ASSERT_TRUE(waitForSubscriber(keyframes, 30.0));
+    cv::RNG rng(11);
+    for (int i = 0; i < 2000; ++i) {  // far more than the node processes in the second it is given
+      mild_lcd::Keyframe kf;
+      kf.header.stamp = ros::Time(100.0 + i);
+      kf.keypoints.resize(800);
+      kf.descriptors.resize(800 * 32);
+      for (auto& b : kf.descriptors) b = static_cast<uint8_t>(rng.uniform(0, 256));
+      keyframes.publish(kf);
+    }
+    ASSERT_TRUE(outputs.waitForCount(5, 60.0));
+    ros::WallDuration(0.5).sleep();
+    const auto start = ros::WallTime::now();
+    kill(pid, SIGINT);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    EXPECT_LT((ros::WallTime::now() - start).toSec(), 10.0) << "inside roslaunch's 15 s";
+    answered = outputs.size();
+  }
+  ASSERT_TRUE(fs::exists(map));
+  const size_t saved = mild::readDetectorFile(map).records.size();
+  EXPECT_GE(saved, answered) << "every answered keyframe is in the saved map";
+  EXPECT_LT(saved, 2000u) << "the queue was not worked off before saving";
 }
 
 }  // namespace

@@ -128,6 +128,22 @@ TEST_F(MildOffline, MalformedGroundTruthFailsBeforeProcessing) {
   EXPECT_EQ(run.output.find("processed"), std::string::npos) << "should fail before the run";
 }
 
+TEST_F(MildOffline, GroundTruthThatCannotBeThisSequencesIsBadInput) {
+  const std::string base = "--images " + kFixture + " --output " + path("c.csv") + " --gt " + path("gt.txt");
+  for (const char* gt : {"12 -3 0.5 1\n", "75 3 0.5 1\n", "", "# nothing\n"}) {  // the fixture has 60 frames
+    std::ofstream(path("gt.txt")) << gt;
+    const ProcessResult run = mildOffline(base);
+    EXPECT_EQ(run.status, 2) << "'" << gt << "': " << run.output;
+    EXPECT_NE(run.output.find(path("gt.txt")), std::string::npos) << run.output;
+  }
+}
+
+TEST_F(MildOffline, AConfigThatIsAFolderIsBadInput) {
+  const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + dir_.string());
+  EXPECT_EQ(run.status, 2) << run.output;
+  EXPECT_NE(run.output.find("not a parameter file"), std::string::npos) << run.output;
+}
+
 TEST_F(MildOffline, BadConfigNamesTheParameter) {
   std::ofstream(path("bad.yaml")) << "filter:\n  no_loop_likelyhood: 3\n";
   const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + path("bad.yaml"));

@@ -30,10 +30,18 @@ struct DecodedImage {
 };
 
 // mono8, bgr8, rgb8, bgra8 and rgba8 are used as they are (no copy); mono16 is scaled to mono8.
-// Anything else, an empty image or a buffer too small for its declared size is rejected.
-DecodedImage imageFromMsg(const sensor_msgs::Image& msg);
-// JPEG or PNG bytes of the `compressed` transport.
-DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg);
+// Anything else, an empty image, one of more than max_pixels, or a buffer too small for its declared
+// size is rejected.
+constexpr uint64_t kDefaultMaxImagePixels = 4096ull * 4096ull;
+DecodedImage imageFromMsg(const sensor_msgs::Image& msg, uint64_t max_pixels = kDefaultMaxImagePixels);
+// JPEG or PNG bytes of the `compressed` transport; the size in the file's header is checked against
+// max_pixels before anything is decoded.
+DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg, uint64_t max_pixels = kDefaultMaxImagePixels);
+// Width and height from a PNG's IHDR or a JPEG's frame header, without decoding; nullopt when the
+// bytes are neither (or the header cannot be found).
+std::optional<cv::Size> compressedImageSize(const std::vector<uint8_t>& data);
+// A time in seconds as a ros::Time, clamped to what ros::Time can hold.
+ros::Time stampOf(double seconds);
 
 std::vector<cv::KeyPoint> keypointsFromMsg(const std::vector<mild_lcd::KeyPoint>& msg);
 std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& keypoints);
@@ -41,14 +49,18 @@ std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& 
 // Keypoints and descriptors of a Keyframe message (32 bytes of descriptor per keypoint).
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 
-// The answer published for one processed keyframe.
+// The answer published for one processed keyframe (candidate stamps come from the candidates).
 mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
-                                       size_t database_size, const std::function<double(uint64_t)>& stamp_of);
+                                       size_t database_size);
 
-// Serves a SparseMatch request. `stored` returns the features of a keyframe in the database (none
-// for an unknown id). Failures come back as success = false with a message, never as exceptions.
+// Serves a SparseMatch request. `stored` returns a copy of the features of a keyframe in the
+// database (none for an unknown id), so that the matching itself needs no lock on it. A side with
+// more than max_features descriptors is refused. Failures come back as success = false with a
+// message, never as exceptions.
 using StoredFeatures = std::function<std::optional<mild::Features>(uint64_t id)>;
+constexpr size_t kDefaultMaxMatchFeatures = 10000;
 mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request& request, const StoredFeatures& stored,
-                                            const mild::GeometricVerifier& verifier);
+                                            const mild::GeometricVerifier& verifier,
+                                            size_t max_features = kDefaultMaxMatchFeatures);
 
 }  // namespace mild_lcd

@@ -1,0 +1,67 @@
+#pragma once
+
+#include <string>
+
+namespace mild {
+
+// A file named by a client, pinned down: an open handle on the folder that holds it plus its name
+// in that folder. Every later step (open, create, rename) goes through the handle, so renaming or
+// replacing folders on the path meanwhile cannot redirect it elsewhere.
+class ConfinedFile {
+ public:
+  ConfinedFile(int folder_fd, std::string name, std::string display);
+  ConfinedFile(ConfinedFile&& other) noexcept;
+  ConfinedFile& operator=(ConfinedFile&& other) noexcept;
+  ConfinedFile(const ConfinedFile&) = delete;
+  ConfinedFile& operator=(const ConfinedFile&) = delete;
+  ~ConfinedFile();
+
+  int folder() const { return folder_fd_; }
+  const std::string& name() const { return name_; }
+  const std::string& display() const { return display_; }  // for messages: the path as resolved
+
+  // Opens the file for reading. Refuses (InvalidInput) a symbolic link, FIFO, socket, device or
+  // folder, and never blocks on one; a missing file is an IoError. Returns the descriptor and the
+  // file's size.
+  int openForReading(unsigned long long& size) const;
+  // Throws InvalidInput when something other than a regular file sits at the name (a symbolic
+  // link, a device, a folder), so that a save never replaces one.
+  void refuseIfNotRegular() const;
+  bool exists() const;
+
+ private:
+  int folder_fd_ = -1;
+  std::string name_;
+  std::string display_;
+};
+
+// A file named by an ordinary path, for tools and tests that trust their paths: the folder is
+// followed as given (symbolic links included); the file itself is still opened without following
+// a link.
+ConfinedFile fileAtPath(const std::string& path);
+
+// The one folder database files may be saved to and loaded from, for names that come from ROS
+// clients (the node often runs as root). A name resolves inside it or is refused:
+//   - relative names ("map.db", "site_a/map.db") are taken from the folder; absolute ones must lie
+//     inside it;
+//   - no "..", no empty or "." components, no symbolic link at any level below the folder;
+//   - at most 4096 bytes, 255 per component.
+// The folder itself is configured by the operator and may be a symbolic link.
+class DatabaseDirectory {
+ public:
+  // Creates the folder (and missing parents) when absent. Throws InvalidInput for a relative
+  // path, IoError when it cannot be created or opened.
+  explicit DatabaseDirectory(const std::string& root);
+  const std::string& root() const { return root_; }
+
+  // Throws InvalidInput naming the rule the request broke. create_folders makes missing
+  // sub-folders (for saving).
+  ConfinedFile resolve(const std::string& requested, bool create_folders = false) const;
+  // The absolute path `requested` resolves to, or "" when it is refused (no file is touched).
+  std::string describe(const std::string& requested) const;
+
+ private:
+  std::string root_;
+};
+
+}  // namespace mild

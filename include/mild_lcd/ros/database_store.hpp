@@ -1,0 +1,50 @@
+#pragma once
+
+// Where maps are saved and loaded, and when: the ~database_dir confinement, ~load_on_start,
+// ~save_on_shutdown and the save_database / load_database services. ROS-free.
+
+#include <atomic>
+#include <string>
+
+#include "mild_lcd/database_directory.hpp"
+#include "mild_lcd/database_file.hpp"
+#include "mild_lcd/ros/node_settings.hpp"
+#include "mild_lcd/ros/shared_detector.hpp"
+
+namespace mild_lcd {
+
+class DatabaseStore {
+ public:
+  // Creates ~database_dir when absent and checks that ~database_path lies inside it. Throws
+  // mild::InvalidInput or mild::IoError.
+  explicit DatabaseStore(const NodeSettings& settings);
+  const std::string& directory() const { return directory_.root(); }
+
+  // ~load_on_start: loads ~database_path as a new session (a missing file starts an empty map).
+  // On any failure the file is left as it is, saving is disabled for the rest of the run (a save
+  // would replace the map with what this run learns from nothing), shared.failure says why, and the
+  // error is rethrown. Returns a line for the log.
+  std::string loadOnStart(SharedDetector& shared);
+
+  // The services. `requested` empty means ~database_path. Names resolve inside ~database_dir or are
+  // refused; loading reads and rebuilds the index without the detector lock, then swaps it in.
+  // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure.
+  std::string save(SharedDetector& shared, const std::string& requested);
+  mild::LoadReport load(SharedDetector& shared, const std::string& requested, bool continue_session);
+
+  // ~save_on_shutdown, unless a start-up load failed. Returns what happened (empty: nothing to do).
+  std::string saveOnShutdown(SharedDetector& shared);
+  bool savesAllowed() const { return saves_allowed_; }
+
+ private:
+  mild::ConfinedFile resolve(const std::string& requested, bool for_saving) const;
+
+  mild::DatabaseDirectory directory_;
+  std::string database_path_;
+  bool load_on_start_;
+  bool save_on_shutdown_;
+  unsigned long long max_bytes_;
+  std::atomic<bool> saves_allowed_{true};
+};
+
+}  // namespace mild_lcd

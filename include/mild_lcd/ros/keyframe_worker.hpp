@@ -1,0 +1,92 @@
+#pragma once
+
+// The one thread that runs the detector: subscriber callbacks push keyframes into a bounded queue
+// (never blocking a nodelet manager thread), the worker decodes and processes them in arrival
+// order, and hands each result to `publish` outside the detector lock. Every keyframe that arrives
+// is answered, or counted: dropped (queue full), rejected (unusable), or discarded (reset, shutdown).
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include <sensor_msgs/CompressedImage.h>
+#include <sensor_msgs/Image.h>
+
+#include "mild_lcd/Keyframe.h"
+#include "mild_lcd/bounded_queue.hpp"
+#include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/shared_detector.hpp"
+
+namespace mild_lcd {
+
+// One keyframe as it arrived; exactly one pointer is set.
+struct KeyframeInput {
+  sensor_msgs::ImageConstPtr image;
+  sensor_msgs::CompressedImageConstPtr compressed;
+  mild_lcd::KeyframeConstPtr keyframe;
+};
+
+// One processed keyframe, for the publishers.
+struct ProcessedKeyframe {
+  std_msgs::Header header;
+  mild::DetectionResult result;
+  size_t database_size = 0;
+  DecodedImage image;                            // empty for keyframe (feature) input
+  std::vector<cv::KeyPoint> query_keypoints;     // filled when `wants_keypoints` said so
+  std::vector<cv::KeyPoint> candidate_keypoints; // of the best candidate, likewise
+};
+
+struct WorkerCounters {
+  size_t processed = 0, rejected = 0, dropped = 0, discarded = 0, queued = 0, capacity = 0;
+  double last_ms = 0.0, mean_ms = 0.0, last_query_ms = 0.0, mean_query_ms = 0.0;
+  size_t keyframes = 0, features = 0, memory_bytes = 0, discarded_buckets = 0;  // database snapshot
+};
+
+class KeyframeWorker {
+ public:
+  struct Hooks {
+    std::function<void()> startup;                                // runs first, on the worker thread
+    std::function<void(const ProcessedKeyframe&)> publish;        // after each keyframe, unlocked
+    std::function<bool()> wants_keypoints;                        // copy keypoints for the debug image?
+    std::function<void(const std::string&)> warn;                 // throttling is the caller's
+  };
+  KeyframeWorker(SharedDetector& shared, size_t queue_size, uint64_t max_image_pixels, Hooks hooks);
+  ~KeyframeWorker();
+
+  void start();
+  // From any thread. False when the queue was full and the oldest keyframe was dropped.
+  bool push(KeyframeInput input);
+  // Removes every waiting keyframe and counts it as discarded; returns how many.
+  size_t discardPending();
+  // Discards what waits, lets the keyframe in progress finish, and joins the thread.
+  void stop();
+  // Blocks until nothing waits or is in progress (tests).
+  void waitIdle() { queue_.waitIdle(); }
+
+  WorkerCounters counters() const;
+  // Marks the database snapshot stale so the next keyframe (or a free detector) refreshes it.
+  void refreshSnapshot(const mild::LoopDetector& detector);
+
+ private:
+  void run();
+  void process(const KeyframeInput& input);
+
+  SharedDetector& shared_;
+  mild::BoundedQueue<KeyframeInput> queue_;
+  const uint64_t max_image_pixels_;
+  Hooks hooks_;
+  std::thread thread_;
+  std::atomic<size_t> discarded_{0};
+
+  mutable std::mutex stats_mutex_;
+  WorkerCounters stats_;  // processed, rejected, timings, snapshot
+  double total_ms_ = 0.0, total_query_ms_ = 0.0;
+  std::chrono::steady_clock::time_point next_snapshot_{};
+};
+
+}  // namespace mild_lcd

@@ -1,0 +1,49 @@
+#pragma once
+
+// Settings of the ROS wrapper itself: how keyframes arrive, queueing, the debug image, where maps
+// are kept. ROS-free (read through mild::ParameterSource), so tests check them without a master.
+// The detector's own parameters are under orb/, index/, ... (config/default.yaml).
+
+#include <string>
+#include <vector>
+
+#include "mild_lcd/parameters.hpp"
+
+namespace mild_lcd {
+
+struct NodeSettings {
+  bool use_image_input = true;
+  bool use_keyframe_input = true;
+  std::string image_transport = "raw";
+  int queue_size = 100;
+  int debug_image_cache = 1000;      // keyframes kept (half resolution, grey) for debug_image
+  int debug_image_cache_mb = 64;     // and at most this many megabytes of them
+  int max_image_pixels = 16777216;   // larger images are refused before decoding (4096 x 4096)
+  std::string database_dir;          // the only folder maps are saved to and loaded from
+  std::string database_path;         // inside database_dir (a name relative to it, or absolute)
+  bool load_on_start = false;
+  bool save_on_shutdown = false;
+  int max_database_mb = 16384;       // larger files are refused unread
+  int max_match_features = 10000;    // per side of a sparse_match request
+
+  // Reads every setting the source holds, type-checked, and validates them. `default_dir` is where
+  // maps go when ~database_dir is not set and ~database_path is relative or empty (the node passes
+  // $ROS_HOME/mild_lcd). Throws mild::InvalidInput naming the parameter.
+  static NodeSettings load(const mild::ParameterSource& source, const std::string& default_dir);
+};
+
+// One line per setting: name, default and meaning (for --print-config style listings and the
+// README's interface table).
+struct SettingDoc {
+  std::string name;
+  std::string default_value;
+  std::string doc;
+};
+const std::vector<SettingDoc>& nodeSettingDocs();
+
+// Throws mild::InvalidInput for the first private parameter that neither the node, the detector nor
+// a library the node uses (diagnostic_updater's diagnostic_period) reads: a misspelt name is an
+// error, not a silent default.
+void rejectUnknownParameters(const mild::ParameterSource& source);
+
+}  // namespace mild_lcd

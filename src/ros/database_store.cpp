@@ -1,0 +1,74 @@
+#include "mild_lcd/ros/database_store.hpp"
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild_lcd {
+
+DatabaseStore::DatabaseStore(const NodeSettings& settings)
+    : directory_(settings.database_dir),
+      database_path_(settings.database_path),
+      load_on_start_(settings.load_on_start),
+      save_on_shutdown_(settings.save_on_shutdown),
+      max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
+  if (!database_path_.empty()) {
+    try {
+      resolve(database_path_, false);
+    } catch (const mild::Error& e) {
+      throw mild::InvalidInput(std::string("parameter ~database_path: ") + e.what());
+    }
+  }
+}
+
+mild::ConfinedFile DatabaseStore::resolve(const std::string& requested, bool for_saving) const {
+  const std::string& name = requested.empty() ? database_path_ : requested;
+  if (name.empty()) throw mild::InvalidInput("no path given and no ~database_path set");
+  return directory_.resolve(name, for_saving);
+}
+
+std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
+  if (!load_on_start_) return "";
+  try {
+    const mild::ConfinedFile file = resolve("", false);
+    if (!file.exists()) return "database " + file.display() + " does not exist yet: starting with an empty map";
+    mild::PreparedLoad prepared = mild::prepareLoad(*shared.detector, file, false, max_bytes_);
+    const std::string message = prepared.report.message;
+    std::lock_guard<std::mutex> lock(shared.mutex);
+    mild::commitLoad(*shared.detector, std::move(prepared));
+    return message;
+  } catch (const std::exception& e) {
+    saves_allowed_ = false;
+    std::lock_guard<std::mutex> lock(shared.mutex);
+    shared.failure = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
+                     "); the file is left untouched and nothing will be saved over it";
+    throw;
+  }
+}
+
+std::string DatabaseStore::save(SharedDetector& shared, const std::string& requested) {
+  const mild::ConfinedFile file = resolve(requested, true);
+  std::lock_guard<std::mutex> lock(shared.mutex);
+  if (!shared.failure.empty()) throw mild::InvalidInput(shared.failure);
+  mild::saveDetector(*shared.detector, file);
+  return "saved " + std::to_string(shared.detector->size()) + " keyframes to " + file.display();
+}
+
+mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
+  const mild::ConfinedFile file = resolve(requested, false);
+  // LoopDetector's parameters never change after construction: preparing needs no lock.
+  mild::PreparedLoad prepared = mild::prepareLoad(*shared.detector, file, continue_session, max_bytes_);
+  mild::LoadReport report = prepared.report;
+  std::lock_guard<std::mutex> lock(shared.mutex);
+  mild::commitLoad(*shared.detector, std::move(prepared));
+  // A map loaded by hand is the user's decision: the start-up failure no longer stands in the way.
+  shared.failure.clear();
+  saves_allowed_ = true;
+  return report;
+}
+
+std::string DatabaseStore::saveOnShutdown(SharedDetector& shared) {
+  if (!save_on_shutdown_) return "";
+  if (!saves_allowed_) return "not saving on shutdown: the map failed to load at start-up and is left as it was";
+  return save(shared, "");
+}
+
+}  // namespace mild_lcd

@@ -1,0 +1,104 @@
+#include "detector_services.hpp"
+
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/ros/conversions.hpp"
+
+namespace mild_lcd {
+namespace {
+
+mild::VerificationParams alwaysOn(mild::VerificationParams p) {
+  p.enabled = true;
+  return p;
+}
+
+}  // namespace
+
+DetectorServices::DetectorServices(const ros::NodeHandle& nh, const std::string& log_name, SharedDetector& shared,
+                                   DatabaseStore& store, KeyframeWorker& worker, DebugImageCache& debug_cache,
+                                   size_t max_match_features)
+    : log_name_(log_name),
+      shared_(shared),
+      store_(store),
+      worker_(worker),
+      debug_cache_(debug_cache),
+      max_match_features_(max_match_features),
+      verifier_(std::make_unique<mild::GeometricVerifier>(alwaysOn(shared.detector->params().verification))),
+      nh_(nh) {
+  nh_.setCallbackQueue(&queue_);
+  match_srv_ = nh_.advertiseService("sparse_match", &DetectorServices::sparseMatch, this);
+  reset_srv_ = nh_.advertiseService("reset", &DetectorServices::reset, this);
+  save_srv_ = nh_.advertiseService("save_database", &DetectorServices::save, this);
+  load_srv_ = nh_.advertiseService("load_database", &DetectorServices::load, this);
+  spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
+  spinner_->start();
+}
+
+DetectorServices::~DetectorServices() { shutdown(); }
+
+void DetectorServices::shutdown() {
+  match_srv_.shutdown();
+  reset_srv_.shutdown();
+  save_srv_.shutdown();
+  load_srv_.shutdown();
+  if (spinner_) spinner_->stop();
+  spinner_.reset();
+}
+
+bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild_lcd::SparseMatch::Response& response) {
+  const auto stored = [this](uint64_t id) -> std::optional<mild::Features> {
+    std::lock_guard<std::mutex> lock(shared_.mutex);  // a copy, then the lock is free again
+    auto k = shared_.detector->find(id);
+    if (!k) return std::nullopt;
+    return shared_.detector->features(*k);
+  };
+  response = mild_lcd::sparseMatch(request, stored, *verifier_, max_match_features_);
+  if (!response.success) ROS_WARN_STREAM_THROTTLE_NAMED(2.0, log_name_, "sparse_match: " << response.message);
+  return true;  // failures are reported in the response, not as a failed call
+}
+
+bool DetectorServices::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
+  const size_t pending = worker_.discardPending();
+  std::lock_guard<std::mutex> lock(shared_.mutex);
+  const size_t keyframes = shared_.detector->size();
+  shared_.detector->reset();
+  shared_.failure.clear();
+  debug_cache_.clear();
+  worker_.refreshSnapshot(*shared_.detector);
+  response.success = true;
+  response.message = "cleared " + std::to_string(keyframes) + " keyframes and " + std::to_string(pending) +
+                     " waiting in the queue (counted as discarded)";
+  ROS_INFO_STREAM_NAMED(log_name_, "reset: " << response.message);
+  return true;
+}
+
+bool DetectorServices::save(mild_lcd::SaveDatabase::Request& request, mild_lcd::SaveDatabase::Response& response) {
+  try {
+    response.message = store_.save(shared_, request.path);
+    response.success = true;
+    ROS_INFO_STREAM_NAMED(log_name_, response.message);
+  } catch (const std::exception& e) {
+    response.success = false;
+    response.message = e.what();
+    ROS_WARN_STREAM_NAMED(log_name_, "save_database: " << e.what());
+  }
+  return true;
+}
+
+bool DetectorServices::load(mild_lcd::LoadDatabase::Request& request, mild_lcd::LoadDatabase::Response& response) {
+  try {
+    response.message = store_.load(shared_, request.path, request.continue_session).message;
+    response.success = true;
+    debug_cache_.clear();
+    ROS_INFO_STREAM_NAMED(log_name_, response.message);
+  } catch (const std::exception& e) {  // std::bad_alloc included: the database is as it was
+    response.success = false;
+    response.message = e.what();
+    ROS_WARN_STREAM_NAMED(log_name_, "load_database: " << e.what());
+  }
+  std::lock_guard<std::mutex> lock(shared_.mutex);
+  response.keyframes = static_cast<uint32_t>(shared_.detector->size());
+  worker_.refreshSnapshot(*shared_.detector);
+  return true;
+}
+
+}  // namespace mild_lcd

@@ -1,0 +1,54 @@
+#pragma once
+
+// The nodelet's services: sparse_match, reset, save_database, load_database. They are served by a
+// thread and callback queue of their own, so that a long request never occupies the manager
+// threads that deliver keyframes, and they hold the detector lock only to copy or swap state.
+
+#include <memory>
+#include <string>
+
+#include <ros/callback_queue.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+
+#include "mild_lcd/LoadDatabase.h"
+#include "mild_lcd/SaveDatabase.h"
+#include "mild_lcd/SparseMatch.h"
+#include "mild_lcd/geometric_verifier.hpp"
+#include "mild_lcd/ros/database_store.hpp"
+#include "mild_lcd/ros/debug_image.hpp"
+#include "mild_lcd/ros/keyframe_worker.hpp"
+#include "mild_lcd/ros/shared_detector.hpp"
+
+namespace mild_lcd {
+
+class DetectorServices {
+ public:
+  DetectorServices(const ros::NodeHandle& nh, const std::string& log_name, SharedDetector& shared, DatabaseStore& store,
+                   KeyframeWorker& worker, DebugImageCache& debug_cache, size_t max_match_features);
+  ~DetectorServices();
+  void shutdown();
+
+ private:
+  bool sparseMatch(mild_lcd::SparseMatch::Request& request, mild_lcd::SparseMatch::Response& response);
+  bool reset(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
+  bool save(mild_lcd::SaveDatabase::Request& request, mild_lcd::SaveDatabase::Response& response);
+  bool load(mild_lcd::LoadDatabase::Request& request, mild_lcd::LoadDatabase::Response& response);
+
+  std::string log_name_;
+  SharedDetector& shared_;
+  DatabaseStore& store_;
+  KeyframeWorker& worker_;
+  DebugImageCache& debug_cache_;
+  const size_t max_match_features_;
+  // The service thread's own verifier: it checks whatever it is asked, even with loop
+  // verification off.
+  std::unique_ptr<mild::GeometricVerifier> verifier_;
+
+  ros::CallbackQueue queue_;
+  ros::NodeHandle nh_;
+  std::unique_ptr<ros::AsyncSpinner> spinner_;
+  ros::ServiceServer match_srv_, reset_srv_, save_srv_, load_srv_;
+};
+
+}  // namespace mild_lcd

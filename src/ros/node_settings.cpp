@@ -1,0 +1,124 @@
+#include "mild_lcd/ros/node_settings.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <limits>
+#include <sstream>
+
+#include "mild_lcd/errors.hpp"
+
+namespace mild_lcd {
+namespace {
+
+using mild::InvalidInput;
+
+// The single declaration of the node's settings: name, field, meaning. Defaults are the struct's.
+template <class Visit>
+void visitSettings(NodeSettings& s, Visit&& visit) {
+  visit("use_image_input", s.use_image_input, "subscribe to `image` (image_transport)");
+  visit("use_keyframe_input", s.use_keyframe_input, "subscribe to `keyframe` (mild_lcd/Keyframe features)");
+  visit("image_transport", s.image_transport, "transport of `image`: raw, compressed, or any installed plugin");
+  visit("queue_size", s.queue_size, "keyframes waiting for the worker; when full the oldest is dropped and counted");
+  visit("debug_image_cache", s.debug_image_cache, "keyframes kept at half resolution for `debug_image` (0 = none)");
+  visit("debug_image_cache_mb", s.debug_image_cache_mb, "and at most this many megabytes of them");
+  visit("max_image_pixels", s.max_image_pixels, "larger images (width x height) are refused before decoding");
+  visit("database_dir", s.database_dir,
+        "the only folder maps are saved to and loaded from (default: database_path's folder, else $ROS_HOME/mild_lcd)");
+  visit("database_path", s.database_path, "map file inside database_dir: default of the services, and of load_on_start/save_on_shutdown");
+  visit("load_on_start", s.load_on_start, "load database_path at start-up, as a new session");
+  visit("save_on_shutdown", s.save_on_shutdown, "save to database_path on shutdown (never after a failed start-up load)");
+  visit("max_database_mb", s.max_database_mb, "database files larger than this are refused unread");
+  visit("max_match_features", s.max_match_features, "descriptors per side of a sparse_match request, at most");
+}
+
+template <class T>
+std::string toText(const T& v) {
+  if constexpr (std::is_same_v<T, bool>) {
+    return v ? "true" : "false";
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    return v.empty() ? "\"\"" : v;
+  } else {
+    return std::to_string(v);
+  }
+}
+
+void requireRange(const std::string& name, int value, int lo, int hi) {
+  if (value < lo || value > hi) {
+    throw InvalidInput("parameter ~" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                       std::to_string(value));
+  }
+}
+
+}  // namespace
+
+const std::vector<SettingDoc>& nodeSettingDocs() {
+  static const std::vector<SettingDoc> docs = [] {
+    std::vector<SettingDoc> out;
+    NodeSettings defaults;
+    visitSettings(defaults, [&](const char* name, auto& field, const char* doc) { out.push_back({name, toText(field), doc}); });
+    return out;
+  }();
+  return docs;
+}
+
+NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::string& default_dir) {
+  NodeSettings s;
+  visitSettings(s, [&](const char* name, auto& field, const char*) {
+    using T = std::decay_t<decltype(field)>;
+    if constexpr (std::is_same_v<T, bool>) {
+      if (auto v = source.getBool(name)) field = *v;
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (auto v = source.getString(name)) field = *v;
+    } else {
+      if (auto v = source.getInt(name)) {
+        if (*v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max()) {
+          throw InvalidInput("parameter ~" + std::string(name) + " is out of range: " + std::to_string(*v));
+        }
+        field = static_cast<int>(*v);
+      }
+    }
+  });
+  if (!s.use_image_input && !s.use_keyframe_input) {
+    throw InvalidInput("~use_image_input and ~use_keyframe_input are both false: nothing to listen to");
+  }
+  requireRange("queue_size", s.queue_size, 1, 100000);
+  requireRange("debug_image_cache", s.debug_image_cache, 0, 1000000);
+  requireRange("debug_image_cache_mb", s.debug_image_cache_mb, 0, 1 << 20);
+  requireRange("max_image_pixels", s.max_image_pixels, 1, 1 << 30);
+  requireRange("max_database_mb", s.max_database_mb, 1, 1 << 24);
+  requireRange("max_match_features", s.max_match_features, 1, 10000000);
+  if (s.image_transport.empty()) throw InvalidInput("parameter ~image_transport must name a transport (raw, compressed, ...)");
+
+  namespace fs = std::filesystem;
+  if ((s.load_on_start || s.save_on_shutdown) && s.database_path.empty()) {
+    throw InvalidInput("~load_on_start and ~save_on_shutdown need ~database_path (the database file)");
+  }
+  if (!s.database_dir.empty() && s.database_dir.front() != '/') {
+    throw InvalidInput("parameter ~database_dir must be an absolute path, got '" + s.database_dir + "'");
+  }
+  if (s.database_dir.empty()) {
+    const fs::path path(s.database_path);
+    s.database_dir = path.is_absolute() && path.has_parent_path() ? path.parent_path().string() : default_dir;
+  }
+  return s;
+}
+
+void rejectUnknownParameters(const mild::ParameterSource& source) {
+  std::vector<std::string> known;
+  NodeSettings scratch;
+  visitSettings(scratch, [&](const char* name, auto&, const char*) { known.emplace_back(name); });
+  // Read by libraries the node uses, from the same private namespace.
+  known.emplace_back("diagnostic_period");
+  const auto& sections = mild::detectorParameterNamespaces();
+  for (const std::string& name : source.names()) {
+    if (std::find(known.begin(), known.end(), name) != known.end()) continue;
+    const std::string top = name.substr(0, name.find('/'));
+    if (std::find(sections.begin(), sections.end(), top) != sections.end()) continue;  // the detector checks its own
+    std::ostringstream names;
+    for (size_t i = 0; i < known.size(); ++i) names << (i ? ", " : "") << known[i];
+    throw InvalidInput("unknown parameter ~" + name + " (the node's own are " + names.str() +
+                       "; the detector's are under orb/, index/, similarity/, filter/, detector/, verification/)");
+  }
+}
+
+}  // namespace mild_lcd

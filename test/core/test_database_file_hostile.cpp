@@ -1,0 +1,248 @@
+// Database files against hostile file systems: what a ROS client (or an unlucky disk) can put where
+// a map is expected, and saves that race each other. Every case fails without its fix.
+
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <thread>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "mild_lcd/database_file.hpp"
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/loop_detector.hpp"
+#include "random_descriptors.hpp"
+
+namespace fs = std::filesystem;
+
+namespace mild {
+namespace {
+
+// A detector holding `keyframes` keyframes of random features, ids from `first_id`.
+std::unique_ptr<LoopDetector> detectorWith(size_t keyframes, uint64_t first_id = 0, uint32_t seed = 1) {
+  DetectorParams p;
+  p.verification.enabled = false;
+  auto d = std::make_unique<LoopDetector>(p);
+  std::mt19937_64 rng(seed);
+  for (size_t k = 0; k < keyframes; ++k) {
+    Features f;
+    for (int i = 0; i < 50; ++i) {
+      f.descriptors.push_back(test::randomDescriptor(rng));
+      f.keypoints.emplace_back(static_cast<float>(i), static_cast<float>(k), 7.0f);
+    }
+    d->process(std::move(f), static_cast<double>(k), first_id + k);
+  }
+  return d;
+}
+
+// Runs `body` in a child process and waits at most `seconds`: true when it exited 0 in time. A
+// child that hangs is killed (a FIFO opened for reading blocks until a writer comes).
+bool inChildWithin(double seconds, const std::function<int()>& body) {
+  const pid_t pid = fork();
+  if (pid == 0) _exit(body());
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  int status = 0;
+  while (std::chrono::steady_clock::now() < end) {
+    if (waitpid(pid, &status, WNOHANG) == pid) return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  kill(pid, SIGKILL);
+  waitpid(pid, &status, 0);
+  return false;
+}
+
+class HostileFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("mild_hostile_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  static std::string contents(const std::string& file) {
+    std::ifstream in(file, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  }
+  // Sets a file's (or link's) modification time `seconds` into the past.
+  static void age(const std::string& file, int seconds) {
+    struct timespec times[2];
+    clock_gettime(CLOCK_REALTIME, &times[0]);
+    times[0].tv_sec -= seconds;
+    times[1] = times[0];
+    ASSERT_EQ(utimensat(AT_FDCWD, file.c_str(), times, AT_SYMLINK_NOFOLLOW), 0) << std::strerror(errno);
+  }
+  size_t temporaries(const std::string& target) const {
+    size_t n = 0;
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      n += e.path().filename().string().rfind(fs::path(target).filename().string() + ".tmp.", 0) == 0 ? 1 : 0;
+    }
+    return n;
+  }
+  fs::path dir_;
+};
+
+TEST_F(HostileFiles, AFifoIsRefusedWithoutBlocking) {
+  ASSERT_EQ(mkfifo(path("map.mild").c_str(), 0600), 0);
+  const std::string fifo = path("map.mild");
+  EXPECT_TRUE(inChildWithin(10.0, [&] {
+    try {
+      readDetectorFile(fifo);
+    } catch (const InvalidInput& e) {
+      return std::string(e.what()).find("a FIFO") != std::string::npos ? 0 : 1;
+    } catch (...) {
+    }
+    return 2;
+  })) << "reading a FIFO must fail at once, naming it";
+}
+
+TEST_F(HostileFiles, AFolderIsRefusedAsInput) {
+  fs::create_directories(path("map.mild"));
+  try {
+    readDetectorFile(path("map.mild"));
+    FAIL() << "read a folder";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("a folder"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(HostileFiles, ASymbolicLinkIsNeitherReadNorWrittenThrough) {
+  auto detector = detectorWith(3);
+  saveDetector(*detector, path("real.mild"));
+  std::ofstream(path("victim.txt")) << "precious";
+  fs::create_symlink(path("real.mild"), path("link.mild"));
+  EXPECT_THROW(readDetectorFile(path("link.mild")), InvalidInput);
+  fs::create_symlink(path("victim.txt"), path("to_victim.mild"));
+  EXPECT_THROW(saveDetector(*detector, path("to_victim.mild")), InvalidInput);
+  EXPECT_EQ(contents(path("victim.txt")), "precious");
+  EXPECT_TRUE(fs::is_symlink(path("to_victim.mild"))) << "the link itself is left alone too";
+}
+
+TEST_F(HostileFiles, AFolderOrDeviceAtTheTargetIsNotReplaced) {
+  auto detector = detectorWith(3);
+  fs::create_directories(path("folder.mild"));
+  EXPECT_THROW(saveDetector(*detector, path("folder.mild")), InvalidInput);
+  EXPECT_TRUE(fs::is_directory(path("folder.mild")));
+  if (mknod(path("null.mild").c_str(), S_IFCHR | 0600, makedev(1, 3)) == 0) {  // /dev/null's numbers (needs root)
+    EXPECT_THROW(saveDetector(*detector, path("null.mild")), InvalidInput);
+    EXPECT_TRUE(fs::is_character_file(path("null.mild")));
+  }
+}
+
+// A sparse 2 GB file: refused on its 32-byte header, in a child whose address space could not even
+// hold the file (reading it whole first would throw std::bad_alloc instead).
+TEST_F(HostileFiles, AHugeFileIsJudgedByItsHeaderNotReadWhole) {
+  const std::string huge = path("huge.mild");
+  { std::ofstream(huge) << "X"; }
+  fs::resize_file(huge, 2ull << 30);
+  EXPECT_TRUE(inChildWithin(30.0, [&] {
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+    const rlimit limit{512ull << 20, 512ull << 20};  // sanitizers reserve terabytes of shadow: no limit there
+    setrlimit(RLIMIT_AS, &limit);
+#endif
+    try {
+      readDetectorFile(huge);
+    } catch (const InvalidInput& e) {
+      return std::string(e.what()).find("not a mild_lcd database") != std::string::npos ? 0 : 1;
+    } catch (...) {
+    }
+    return 2;
+  }));
+}
+
+// A real database over the size bound is refused unread, as a capacity problem.
+TEST_F(HostileFiles, AFileOverTheSizeBoundIsRefusedUnread) {
+  auto detector = detectorWith(40);
+  saveDetector(*detector, path("map.mild"));
+  const auto size = fs::file_size(path("map.mild"));
+  ASSERT_GT(size, 64u << 10);
+  try {
+    readDetectorFile(path("map.mild"), 64u << 10);
+    FAIL() << "read a file over the bound";
+  } catch (const CapacityError& e) {
+    EXPECT_NE(std::string(e.what()).find("allowed"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(readDetectorFile(path("map.mild"), size).records.size(), 40u) << "at the bound it loads";
+}
+
+// Two detectors (as two nodelets in one manager) saving to one path at once, 20 times: every save
+// leaves a complete file of one of them, never a mix, and no temporary file stays behind.
+TEST_F(HostileFiles, ConcurrentSavesToOnePathNeverCorruptEachOther) {
+  auto small = detectorWith(5, 0, 1);
+  auto large = detectorWith(60, 1000, 2);
+  const std::string target = path("shared.mild");
+  for (int round = 0; round < 20; ++round) {
+    std::atomic<int> failures{0};
+    std::thread a([&] {
+      try {
+        saveDetector(*small, target);
+      } catch (...) {
+        ++failures;
+      }
+    });
+    std::thread b([&] {
+      try {
+        saveDetector(*large, target);
+      } catch (...) {
+        ++failures;
+      }
+    });
+    a.join();
+    b.join();
+    EXPECT_EQ(failures.load(), 0) << "round " << round;
+    const DetectorState state = readDetectorFile(target);
+    const size_t n = state.records.size();
+    ASSERT_TRUE(n == 5 || n == 60) << "round " << round << ": " << n << " keyframes";
+    EXPECT_EQ(state.records.front().id, n == 5 ? 0u : 1000u) << "one detector's file, whole";
+  }
+  EXPECT_EQ(temporaries(target), 0u);
+}
+
+TEST_F(HostileFiles, TemporaryFilesOfKilledSavesAreRemovedByTheNextSave) {
+  auto detector = detectorWith(3);
+  const std::string target = path("map.mild");
+  const std::string stale = target + ".tmp.0badf00d", fresh = target + ".tmp.0000beef", locked = target + ".tmp.000c0ffe";
+  for (const auto& f : {stale, fresh, locked}) std::ofstream(f) << "half a database";
+  age(stale, 3600);
+  age(locked, 3600);
+  const int held = open(locked.c_str(), O_RDONLY);
+  ASSERT_EQ(flock(held, LOCK_EX), 0);  // a save in progress elsewhere holds its lock
+  saveDetector(*detector, target);
+  EXPECT_FALSE(fs::exists(stale)) << "abandoned an hour ago, unlocked: removed";
+  EXPECT_TRUE(fs::exists(fresh)) << "seconds old: may belong to a save that has not locked it yet";
+  EXPECT_TRUE(fs::exists(locked)) << "locked: a save in progress";
+  close(held);
+  EXPECT_EQ(readDetectorFile(target).records.size(), 3u);
+}
+
+// A link planted under a temporary name (a guess at the next one, or an old one's) is not followed:
+// neither by the save nor by the clean-up.
+TEST_F(HostileFiles, LinksPlantedAtTemporaryNamesAreNotFollowed) {
+  auto detector = detectorWith(3);
+  const std::string target = path("map.mild");
+  std::ofstream(path("victim.txt")) << "precious";
+  const std::string planted = target + ".tmp.12345678";
+  fs::create_symlink(path("victim.txt"), planted);
+  age(planted, 3600);
+  for (int i = 0; i < 5; ++i) saveDetector(*detector, target);
+  EXPECT_EQ(contents(path("victim.txt")), "precious");
+  EXPECT_TRUE(fs::is_symlink(planted));
+  EXPECT_EQ(readDetectorFile(target).records.size(), 3u);
+}
+
+}  // namespace
+}  // namespace mild

@@ -1,0 +1,263 @@
+// The ROS layer's parts that need no master: node settings, where maps may go, the keyframe
+// worker's counting, the debug image cache, compressed-image headers.
+
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+
+#include <boost/make_shared.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <sensor_msgs/image_encodings.h>
+
+#include "mild_lcd/database_file.hpp"
+#include "mild_lcd/errors.hpp"
+#include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/database_store.hpp"
+#include "mild_lcd/ros/debug_image.hpp"
+#include "mild_lcd/ros/keyframe_worker.hpp"
+#include "mild_lcd/ros/node_settings.hpp"
+
+namespace fs = std::filesystem;
+
+namespace mild_lcd {
+namespace {
+
+using mild::YamlParameterSource;
+
+NodeSettings settingsFrom(const std::string& yaml, const std::string& default_dir = "/tmp/mild_default") {
+  return NodeSettings::load(YamlParameterSource::fromString(yaml), default_dir);
+}
+
+std::string errorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
+  EXPECT_NE(errorOf([] { settingsFrom("save_on_shutdown: \"true\"\n"); }).find("save_on_shutdown"), std::string::npos)
+      << "a string where a boolean belongs";
+  EXPECT_NE(errorOf([] { settingsFrom("queue_size: 2.5\n"); }).find("queue_size"), std::string::npos);
+  EXPECT_NE(errorOf([] { settingsFrom("queue_size: 0\n"); }).find("queue_size"), std::string::npos);
+  const std::string typo = errorOf([] { rejectUnknownParameters(YamlParameterSource::fromString("queue_sise: 10\n")); });
+  EXPECT_NE(typo.find("~queue_sise"), std::string::npos) << typo;
+  EXPECT_NE(typo.find("queue_size"), std::string::npos) << "lists the real names: " << typo;
+  EXPECT_EQ(errorOf([] {
+              rejectUnknownParameters(YamlParameterSource::fromString(
+                  "queue_size: 10\ndiagnostic_period: 1.0\norb:\n  num_features: 500\n"));
+            }),
+            "")
+      << "the node's, the detector's and diagnostic_updater's names are known";
+  EXPECT_NE(errorOf([] { settingsFrom("use_image_input: false\nuse_keyframe_input: false\n"); }).find("nothing to listen"),
+            std::string::npos);
+  EXPECT_NE(errorOf([] { settingsFrom("load_on_start: true\n"); }).find("database_path"), std::string::npos);
+  EXPECT_NE(errorOf([] { settingsFrom("database_dir: maps\n"); }).find("absolute"), std::string::npos);
+}
+
+TEST(NodeSettings, TheDatabaseFolderDefaultsToThePathsFolderOrRosHome) {
+  EXPECT_EQ(settingsFrom("").database_dir, "/tmp/mild_default");
+  EXPECT_EQ(settingsFrom("database_path: /data/maps/site.db\n").database_dir, "/data/maps");
+  EXPECT_EQ(settingsFrom("database_path: site.db\n").database_dir, "/tmp/mild_default");
+  EXPECT_EQ(settingsFrom("database_dir: /srv/maps\ndatabase_path: site.db\n").database_dir, "/srv/maps");
+  EXPECT_FALSE(nodeSettingDocs().empty());
+}
+
+class Store : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("mild_store_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  static std::unique_ptr<mild::LoopDetector> detector(size_t keyframes) {
+    mild::DetectorParams p;
+    p.verification.enabled = false;
+    auto d = std::make_unique<mild::LoopDetector>(p);
+    cv::RNG rng(3);
+    for (size_t k = 0; k < keyframes; ++k) {
+      mild::Features f;
+      for (int i = 0; i < 200; ++i) {
+        mild::Descriptor desc;
+        for (auto& w : desc.words) w = (static_cast<uint64_t>(rng.next()) << 32) | rng.next();
+        f.descriptors.push_back(desc);
+        f.keypoints.emplace_back(1.0f * i, 1.0f * k, 7.0f);
+      }
+      d->process(std::move(f), 1.0 * k);
+    }
+    return d;
+  }
+  NodeSettings settings(const std::string& extra = "") const {
+    return settingsFrom("database_dir: " + dir_.string() + "\n" + extra);
+  }
+  fs::path dir_;
+};
+
+// Any failure to load at start-up (here a map over ~max_database_mb: a CapacityError, not bad
+// input) leaves the file as it is and keeps save_on_shutdown from writing over it.
+TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
+  SharedDetector original;
+  original.detector = detector(120);
+  mild::saveDetector(*original.detector, (dir_ / "map.db").string());
+  const auto size = fs::file_size(dir_ / "map.db");
+  ASSERT_GT(size, 1u << 20);
+
+  DatabaseStore store(settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\nmax_database_mb: 1\n"));
+  SharedDetector running;
+  running.detector = detector(0);
+  const std::string error = errorOf([&] { store.loadOnStart(running); });
+  EXPECT_NE(error.find("allowed"), std::string::npos) << error;
+  EXPECT_FALSE(running.failure.empty()) << "keyframes are refused, saying why";
+  EXPECT_NE(running.failure.find("left untouched"), std::string::npos) << running.failure;
+  EXPECT_NE(store.saveOnShutdown(running).find("not saving"), std::string::npos);
+  EXPECT_THROW(store.save(running, ""), mild::InvalidInput) << "nor through the service";
+  EXPECT_EQ(fs::file_size(dir_ / "map.db"), size) << "the map is untouched";
+  EXPECT_EQ(mild::readDetectorFile((dir_ / "map.db").string()).records.size(), 120u);
+}
+
+TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
+  DatabaseStore store(settings("database_path: new.db\nload_on_start: true\nsave_on_shutdown: true\n"));
+  SharedDetector running;
+  running.detector = detector(3);
+  EXPECT_NE(store.loadOnStart(running).find("does not exist yet"), std::string::npos);
+  EXPECT_NE(store.saveOnShutdown(running).find("saved 3 keyframes"), std::string::npos);
+  EXPECT_EQ(mild::readDetectorFile((dir_ / "new.db").string()).records.size(), 3u);
+}
+
+TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {
+  DatabaseStore store(settings());
+  SharedDetector shared;
+  shared.detector = detector(4);
+  std::ofstream(dir_.parent_path() / "victim.txt") << "precious";
+  for (const std::string& bad : {std::string("../victim.txt"), (dir_.parent_path() / "victim.txt").string(), std::string("")}) {
+    EXPECT_THROW(store.save(shared, bad), mild::InvalidInput) << bad;
+  }
+  EXPECT_EQ(store.save(shared, "robot/one.db"), "saved 4 keyframes to " + (dir_ / "robot/one.db").string());
+  SharedDetector other;
+  other.detector = detector(0);
+  EXPECT_EQ(store.load(other, (dir_ / "robot/one.db").string(), false).keyframes, 4u);
+  EXPECT_EQ(other.detector->size(), 4u);
+  EXPECT_THROW(DatabaseStore(settings("database_path: /etc/passwd\n")), mild::InvalidInput)
+      << "~database_path outside ~database_dir stops the node at start-up";
+}
+
+// --- the worker
+
+sensor_msgs::ImagePtr image(int width, int height, double stamp, const std::string& encoding = "mono8") {
+  auto msg = boost::make_shared<sensor_msgs::Image>();
+  msg->header.stamp = ros::Time(stamp);
+  msg->width = static_cast<uint32_t>(width);
+  msg->height = static_cast<uint32_t>(height);
+  msg->encoding = encoding;
+  msg->step = static_cast<uint32_t>(width);
+  msg->data.resize(static_cast<size_t>(width) * static_cast<size_t>(height));
+  cv::RNG rng(static_cast<uint64_t>(stamp * 10) + 1);
+  for (auto& b : msg->data) b = static_cast<uint8_t>(rng.uniform(0, 256));
+  return msg;
+}
+
+TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
+  SharedDetector shared;
+  mild::DetectorParams p;
+  p.verification.enabled = false;
+  shared.detector = std::make_unique<mild::LoopDetector>(p);
+  std::atomic<int> published{0};
+  KeyframeWorker::Hooks hooks;
+  hooks.publish = [&](const ProcessedKeyframe&) {
+    ++published;
+    throw std::runtime_error("a publisher that fails");  // not the keyframe's fault
+  };
+  KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
+  worker.start();
+  worker.push({image(200, 150, 1.0), nullptr, nullptr});
+  worker.push({image(1, 1, 2.0), nullptr, nullptr});    // thinner than ORB's border: stored, no features
+  worker.push({image(8, 8, 3.0, "32FC1"), nullptr, nullptr});  // unusable encoding
+  worker.push({image(2000, 1000, 4.0), nullptr, nullptr});  // over max_image_pixels
+  worker.waitIdle();
+  const WorkerCounters c = worker.counters();
+  EXPECT_EQ(c.processed, 2u) << "the thin image is a keyframe, answered";
+  EXPECT_EQ(c.rejected, 2u);
+  EXPECT_EQ(published.load(), 2);
+  EXPECT_EQ(shared.detector->size(), 2u);
+}
+
+TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
+  SharedDetector shared;
+  shared.detector = std::make_unique<mild::LoopDetector>();
+  std::mutex gate;
+  std::unique_lock<std::mutex> hold(gate);  // the first keyframe waits here until we let it go
+  KeyframeWorker::Hooks hooks;
+  hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
+  KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
+  worker.start();
+  for (int i = 0; i < 10; ++i) worker.push({image(160, 120, i), nullptr, nullptr});
+  while (worker.counters().queued > 9) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::thread stopper([&] { worker.stop(); });
+  while (worker.counters().discarded == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  hold.unlock();
+  stopper.join();
+  const WorkerCounters c = worker.counters();
+  EXPECT_EQ(c.processed + c.discarded + c.dropped + c.rejected, 10u) << "every keyframe accounted for";
+  EXPECT_EQ(c.processed, 1u);
+}
+
+TEST(DebugImages, TheCacheIsBoundedInBytes) {
+  DebugImageCache cache(1000, 4u << 20);
+  for (uint64_t id = 0; id < 20; ++id) cache.remember(id, cv::Mat(2000, 2000, CV_8UC1, cv::Scalar(1)), mild::PixelFormat::kGray);
+  EXPECT_LE(cache.bytes(), 4u << 20);
+  EXPECT_FALSE(cache.find(19).empty()) << "the newest stays";
+  EXPECT_TRUE(cache.find(0).empty());
+  cache.remember(50, cv::Mat(1, 1, CV_8UC1, cv::Scalar(9)), mild::PixelFormat::kGray);  // no half of one pixel
+  EXPECT_FALSE(cache.find(50).empty());
+}
+
+TEST(DebugImages, KeepTheDecodedChannelOrder) {
+  cv::Mat rgb(40, 40, CV_8UC3, cv::Scalar(255, 0, 0));  // pure red as RGB
+  DebugImageCache cache(10, 1u << 20);
+  cache.remember(1, rgb, mild::PixelFormat::kRgb);
+  cache.remember(2, rgb, mild::PixelFormat::kBgr);  // the same bytes read as BGR: blue
+  EXPECT_NE(cache.find(1).at<uint8_t>(5, 5), cache.find(2).at<uint8_t>(5, 5));
+  EXPECT_EQ(cache.find(1).at<uint8_t>(5, 5), 76) << "red's luma (0.299 x 255)";
+}
+
+// A few hundred bytes of JPEG whose header claims 20000 x 20000 pixels are refused on the header.
+TEST(CompressedImages, AreJudgedByTheirHeaderBeforeDecoding) {
+  std::vector<uint8_t> jpeg;
+  cv::imencode(".jpg", cv::Mat(8, 8, CV_8UC1, cv::Scalar(100)), jpeg);
+  ASSERT_EQ(compressedImageSize(jpeg), cv::Size(8, 8));
+  for (size_t i = 2; i + 9 < jpeg.size(); ++i) {  // rewrite the frame header's size
+    if (jpeg[i] == 0xFF && jpeg[i + 1] == 0xC0) {
+      jpeg[i + 5] = 20000 >> 8, jpeg[i + 6] = 20000 & 0xFF, jpeg[i + 7] = 20000 >> 8, jpeg[i + 8] = 20000 & 0xFF;
+    }
+  }
+  ASSERT_EQ(compressedImageSize(jpeg), cv::Size(20000, 20000));
+  sensor_msgs::CompressedImage msg;
+  msg.format = "jpeg";
+  msg.data = jpeg;
+  const std::string error = errorOf([&] { imageFromMsg(msg, 4096u * 4096u); });
+  EXPECT_NE(error.find("20000 x 20000"), std::string::npos) << error;
+
+  std::vector<uint8_t> png;
+  cv::imencode(".png", cv::Mat(30, 50, CV_8UC1, cv::Scalar(1)), png);
+  EXPECT_EQ(compressedImageSize(png), cv::Size(50, 30));
+  msg.data = png;
+  EXPECT_EQ(imageFromMsg(msg, 50 * 30).image.size(), cv::Size(50, 30));
+  EXPECT_THROW(imageFromMsg(msg, 50 * 30 - 1), mild::InvalidInput);
+}
+
+TEST(Conversions, StampsOutsideRosTimeAreClamped) {
+  EXPECT_EQ(stampOf(-5.0), ros::Time(0, 0));
+  EXPECT_EQ(stampOf(1e12), ros::Time(4294967295u, 0));
+  EXPECT_EQ(stampOf(12.5), ros::Time(12.5));
+}
+
+}  // namespace
+}  // namespace mild_lcd
