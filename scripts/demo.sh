@@ -25,6 +25,16 @@ export ROS_MASTER_URI="http://localhost:$PORT"
 STARTED=()
 stop_started() {
   for pid in "${STARTED[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  # SIGINT first (a clean stop); whatever still runs after 15 s gets SIGTERM, then SIGKILL.
+  for _ in $(seq 150); do
+    alive=0
+    for pid in "${STARTED[@]}"; do kill -0 "$pid" 2>/dev/null && alive=1; done
+    [[ $alive -eq 0 ]] && break
+    sleep 0.1
+  done
+  for pid in "${STARTED[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  sleep 1
+  for pid in "${STARTED[@]}"; do kill -KILL "$pid" 2>/dev/null || true; done
   for pid in "${STARTED[@]}"; do wait "$pid" 2>/dev/null || true; done
 }
 trap stop_started EXIT
@@ -38,6 +48,7 @@ done
 rosparam get /rosdistro >/dev/null 2>&1 || { echo "[mild_lcd] roscore did not start (see $OUT/roscore.log)" >&2; exit 1; }
 
 rm -f "$OUT/replay_result.json"
+: >"$OUT/roslaunch.log"  # exists before tail follows it
 echo "[mild_lcd] replaying $BAG ($FRAMES keyframes) through mild_lcd/LoopClosureNodelet on $ROS_MASTER_URI"
 roslaunch --wait mild_lcd replay.launch bag:="$BAG" image:=/camera/image rate:="${RATE:-2}" frames:="$FRAMES" \
   gt:="$SAMPLE/gt_loops.txt" output_csv:="$OUT/ros_candidates.csv" every_keyframe:=true \
