@@ -6,7 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sensor_msgs/image_encodings.h>
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 
 namespace mild_lcd {
 namespace enc = sensor_msgs::image_encodings;

@@ -1,6 +1,6 @@
 #include "detector_services.hpp"
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 
 namespace mild_lcd {

@@ -14,7 +14,7 @@
 #include "mild_lcd/LoadDatabase.h"
 #include "mild_lcd/SaveDatabase.h"
 #include "mild_lcd/SparseMatch.h"
-#include "mild_lcd/geometric_verifier.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"

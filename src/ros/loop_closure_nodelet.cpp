@@ -17,8 +17,8 @@
 
 #include "detector_diagnostics.hpp"
 #include "detector_services.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"

@@ -17,8 +17,8 @@
 
 #include "common/image_sequence.hpp"
 #include "mild_lcd/Keyframe.h"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/feature_extractor.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 
 int main(int argc, char** argv) {

@@ -5,7 +5,7 @@
 #include <limits>
 #include <sstream>
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 
 namespace mild_lcd {
 namespace {

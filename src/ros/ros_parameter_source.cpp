@@ -1,6 +1,6 @@
 #include "mild_lcd/ros/ros_parameter_source.hpp"
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 
 namespace mild_lcd {
 namespace {

@@ -14,11 +14,11 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "common/image_sequence.hpp"
-#include "mild_lcd/distance_priors.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
-#include "mild_lcd/feature_extractor.hpp"
-#include "mild_lcd/mih_analysis.hpp"
+#include "mild_lcd/offline/distance_priors.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/offline/mih_analysis.hpp"
 #include "offline_plots.hpp"
 
 namespace fs = std::filesystem;

@@ -17,10 +17,10 @@
 
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
-#include "mild_lcd/feature_extractor.hpp"
-#include "mild_lcd/sparse_matcher.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/verification/sparse_matcher.hpp"
 
 namespace {
 

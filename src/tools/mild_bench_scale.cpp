@@ -22,10 +22,10 @@
 #include "bench/synthetic_keyframes.hpp"
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
-#include "mild_lcd/database_file.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/feature_extractor.hpp"
-#include "mild_lcd/keyframe_database.hpp"
+#include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/place/keyframe_database.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;

@@ -16,10 +16,10 @@
 #include "common/npy_writer.hpp"
 #include "common/progress_bar.hpp"
 #include "common/timing_summary.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
-#include "mild_lcd/loop_detector.hpp"
-#include "mild_lcd/parameters.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/params/parameters.hpp"
 #include "offline_plots.hpp"
 
 namespace fs = std::filesystem;

@@ -7,8 +7,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 
 int main(int argc, char** argv) {
   CLI::App app{"Score loop-closure candidates against ground truth (recall@100%P, AP, max F1)."};

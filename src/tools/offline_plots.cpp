@@ -6,7 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 
 namespace fs = std::filesystem;
 

@@ -3,7 +3,7 @@
 #include <string>
 #include <vector>
 
-#include "mild_lcd/evaluation.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 
 namespace mild::tools {
 

@@ -5,7 +5,7 @@
 #include <random>
 #include <vector>
 
-#include "mild_lcd/descriptor.hpp"
+#include "mild_lcd/features/descriptor.hpp"
 
 namespace mild::test {
 

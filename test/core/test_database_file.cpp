@@ -15,9 +15,9 @@
 
 #include <cstring>
 
-#include "mild_lcd/database_file.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 
 namespace fs = std::filesystem;
 

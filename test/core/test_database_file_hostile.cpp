@@ -21,9 +21,9 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "mild_lcd/database_file.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "random_descriptors.hpp"
 
 namespace fs = std::filesystem;

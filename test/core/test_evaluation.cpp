@@ -8,8 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 
 namespace fs = std::filesystem;
 

@@ -6,8 +6,8 @@
 #include <random>
 #include <set>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/keyframe_database.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/place/keyframe_database.hpp"
 #include "random_descriptors.hpp"
 
 namespace mild {

@@ -8,9 +8,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 
 namespace fs = std::filesystem;
 

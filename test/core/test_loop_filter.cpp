@@ -5,8 +5,8 @@
 #include <numeric>
 #include <random>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/loop_filter.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/filter/loop_filter.hpp"
 
 namespace mild {
 namespace {

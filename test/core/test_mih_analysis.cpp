@@ -5,11 +5,11 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "mild_lcd/distance_priors.hpp"
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/evaluation.hpp"
-#include "mild_lcd/mih_analysis.hpp"
-#include "mild_lcd/mih_index.hpp"
+#include "mild_lcd/offline/distance_priors.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/offline/mih_analysis.hpp"
+#include "mild_lcd/index/mih_index.hpp"
 #include "random_descriptors.hpp"
 
 namespace mild {

@@ -3,8 +3,8 @@
 #include <random>
 #include <set>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/mih_index.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/index/mih_index.hpp"
 #include "random_descriptors.hpp"
 
 namespace mild {

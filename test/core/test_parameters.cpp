@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <set>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/parameters.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/params/parameters.hpp"
 
 namespace mild {
 namespace {

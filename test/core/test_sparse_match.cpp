@@ -4,10 +4,10 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/feature_extractor.hpp"
-#include "mild_lcd/geometric_verifier.hpp"
-#include "mild_lcd/sparse_matcher.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
+#include "mild_lcd/verification/sparse_matcher.hpp"
 #include "random_descriptors.hpp"
 
 namespace mild {

@@ -2,8 +2,8 @@
 
 #include <random>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/substring_layout.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/index/substring_layout.hpp"
 #include "random_descriptors.hpp"
 
 namespace mild {

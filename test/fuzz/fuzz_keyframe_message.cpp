@@ -3,8 +3,8 @@
 // the fuzzer explores what a publisher can send, not roscpp's own wire decoder.
 #include <fuzzer/FuzzedDataProvider.h>
 
-#include "mild_lcd/errors.hpp"
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 
 namespace {

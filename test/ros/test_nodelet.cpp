@@ -27,7 +27,7 @@
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SparseMatch.h"
-#include "mild_lcd/evaluation.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 #include "../common/run_command.hpp"
 #include "ros_test_support.hpp"
 

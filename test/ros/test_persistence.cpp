@@ -25,8 +25,8 @@
 #include "mild_lcd/LoadDatabase.h"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SaveDatabase.h"
-#include "mild_lcd/database_file.hpp"
-#include "mild_lcd/evaluation.hpp"
+#include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 #include "ros_test_support.hpp"
 
 namespace fs = std::filesystem;

@@ -13,8 +13,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sensor_msgs/image_encodings.h>
 
-#include "mild_lcd/database_file.hpp"
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"

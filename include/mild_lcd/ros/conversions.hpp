@@ -18,8 +18,8 @@
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SparseMatch.h"
-#include "mild_lcd/geometric_verifier.hpp"
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 
 namespace mild_lcd {
 

@@ -6,8 +6,8 @@
 #include <atomic>
 #include <string>
 
-#include "mild_lcd/database_directory.hpp"
-#include "mild_lcd/database_file.hpp"
+#include "mild_lcd/io/database_directory.hpp"
+#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
 #include "mild_lcd/ros/shared_detector.hpp"
 

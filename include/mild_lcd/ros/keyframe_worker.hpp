@@ -18,7 +18,7 @@
 #include <sensor_msgs/Image.h>
 
 #include "mild_lcd/Keyframe.h"
-#include "mild_lcd/bounded_queue.hpp"
+#include "mild_lcd/common/bounded_queue.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/shared_detector.hpp"
 

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "mild_lcd/parameters.hpp"
+#include "mild_lcd/params/parameters.hpp"
 
 namespace mild_lcd {
 

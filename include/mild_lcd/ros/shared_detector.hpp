@@ -4,7 +4,7 @@
 #include <mutex>
 #include <string>
 
-#include "mild_lcd/loop_detector.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 
 namespace mild_lcd {
 

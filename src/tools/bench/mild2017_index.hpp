@@ -9,8 +9,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "mild_lcd/descriptor.hpp"
-#include "mild_lcd/keyframe_database.hpp"
+#include "mild_lcd/features/descriptor.hpp"
+#include "mild_lcd/place/keyframe_database.hpp"
 
 namespace mild::tools {
 

@@ -2,7 +2,7 @@
 
 #include <algorithm>
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 
 namespace mild::tools {
 

@@ -5,7 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "mild_lcd/errors.hpp"
+#include "mild_lcd/common/errors.hpp"
 
 namespace fs = std::filesystem;
 

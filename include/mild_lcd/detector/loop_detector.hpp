@@ -1,0 +1,167 @@
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "mild_lcd/verification/candidate_verifier.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
+#include "mild_lcd/place/keyframe_database.hpp"
+#include "mild_lcd/filter/loop_filter.hpp"
+
+namespace mild {
+
+struct CandidateParams {
+  // Temporal exclusion: keyframes closer than this to the query (in keyframes, or in seconds when
+  // > 0) are never candidates, and take no part in the similarity (they would dominate it).
+  int exclusion_frames = 40;
+  double exclusion_seconds = 0.0;
+  // At most this many candidates per keyframe, each a local maximum of the loop probability over
+  // +- suppression_radius keyframes, with probability >= min_probability.
+  int max_candidates = 3;
+  int suppression_radius = 5;
+  double min_probability = 0.0;
+
+  void validate() const;
+};
+
+struct DetectorParams {
+  OrbParams orb;
+  DatabaseParams database;
+  FilterParams filter;
+  CandidateParams candidates;
+  VerificationParams verification;
+  SearchMode search = SearchMode::kIndex;
+
+  void validate() const;
+};
+
+struct LoopCandidate {
+  uint64_t id = 0;            // the candidate keyframe's id
+  KeyframeIndex index = 0;    // its position in the database
+  double stamp = 0.0;
+  double probability = 0.0;   // posterior loop probability from the filter
+  double similarity = 0.0;    // Phi' of the query against this keyframe
+  Verification verification;  // geometric check (verified=false, inliers=0 when verification is off)
+};
+
+struct StepStats {
+  double extract_ms = 0.0;
+  double query_ms = 0.0;
+  double filter_ms = 0.0;
+  double verify_ms = 0.0;
+  size_t features = 0;
+  size_t eligible_keyframes = 0;
+  QueryStats query;
+};
+
+struct DetectionResult {
+  uint64_t query_id = 0;
+  KeyframeIndex query_index = 0;
+  std::vector<LoopCandidate> candidates;  // best first
+  std::vector<double> similarity;         // Phi' against every eligible keyframe (by database index)
+  StepStats stats;
+};
+
+// A stored keyframe, as handed to verifiers and clients (e.g. the sparse-match service).
+struct KeyframeRecord {
+  uint64_t id = 0;
+  double stamp = 0.0;
+  std::vector<cv::KeyPoint> keypoints;
+};
+
+// Everything a detector has learnt, as plain data: what database_file.hpp saves and loads.
+struct DetectorState {
+  std::string parameters;  // "name: value" lines of the detector that saved it (describeParameters)
+  uint64_t next_id = 0;
+  KeyframeIndex session_start = 0;
+  std::vector<KeyframeRecord> records;     // in database order
+  std::vector<DescriptorList> descriptors; // one list per record, one descriptor per keypoint
+  std::vector<double> posterior;           // the filter's state
+  double no_loop = 1.0;
+};
+
+// A state checked and turned into a ready database and filter, waiting to replace a detector's.
+struct PreparedRestore {
+  KeyframeDatabase database;
+  LoopFilter filter;
+  std::vector<KeyframeRecord> records;
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
+  uint64_t next_id = 0;
+  KeyframeIndex session_start = 0;
+};
+
+// Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
+constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
+
+// The loop-closure pipeline: features -> MIH database (insert and query) -> Bayesian filter ->
+// ranked candidates -> optional geometric verification. Not thread-safe: callers serialise access.
+class LoopDetector {
+ public:
+  explicit LoopDetector(const DetectorParams& params = {});
+  ~LoopDetector();
+
+  const DetectorParams& params() const { return params_; }
+
+  // Replaces the check run on every reported candidate (a GeometricVerifier when
+  // verification.enabled, none otherwise).
+  void setVerifier(std::unique_ptr<CandidateVerifier> verifier) { verifier_ = std::move(verifier); }
+  bool verifies() const { return verifier_ != nullptr; }
+
+  // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image, an
+  // id already in the database or above kMaxKeyframeId. Without an id, the next free one (largest so
+  // far + 1) is used; CapacityError once that would pass kMaxKeyframeId.
+  DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
+                          std::optional<uint64_t> id = std::nullopt);
+  // Same, for features computed elsewhere (e.g. by the SLAM front-end).
+  DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
+
+  // Replaces everything the detector has learnt by `state` (the index is rebuilt from the
+  // descriptors with this detector's parameters). continue_session = true resumes exactly where the
+  // saved run stopped: the same outputs as if it had never stopped. false starts a new session on
+  // the stored map (e.g. yesterday's): the loaded keyframes are exempt from the temporal exclusion,
+  // since they were not seen a moment ago, and the filter starts from "no loop".
+  // Throws InvalidInput, changing nothing, when the state is inconsistent.
+  void restore(DetectorState state, bool continue_session);
+  // restore() in two steps: prepareRestore reads only the detector's parameters (fixed at
+  // construction), so it may run without the caller's lock; commitRestore cannot fail.
+  PreparedRestore prepareRestore(DetectorState state, bool continue_session) const;
+  void commitRestore(PreparedRestore&& prepared);
+  // Keyframes [0, sessionStart()) come from an earlier session and are always eligible.
+  KeyframeIndex sessionStart() const { return session_start_; }
+
+  size_t size() const { return records_.size(); }
+  const KeyframeDatabase& database() const { return database_; }
+  const LoopFilter& filter() const { return filter_; }
+  const KeyframeRecord& record(KeyframeIndex k) const { return records_[k]; }
+  std::optional<KeyframeIndex> find(uint64_t id) const;
+  Features features(KeyframeIndex k) const;
+  uint64_t nextId() const { return next_id_; }
+  size_t memoryBytes() const;
+
+  void reset();
+
+ private:
+  void checkId(std::optional<uint64_t> id) const;
+  KeyframeIndex eligibleCount(double stamp) const;
+  std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief,
+                                              const std::vector<double>& similarity) const;
+
+  DetectorParams params_;
+  OrbExtractor extractor_;
+  KeyframeDatabase database_;
+  LoopFilter filter_;
+  std::unique_ptr<CandidateVerifier> verifier_;
+  std::vector<KeyframeRecord> records_;
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
+  uint64_t next_id_ = 0;
+  KeyframeIndex session_start_ = 0;
+};
+
+}  // namespace mild

@@ -1,0 +1,200 @@
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <unordered_map>
+#include <vector>
+
+#include "mild_lcd/features/descriptor.hpp"
+#include "mild_lcd/index/substring_layout.hpp"
+#include "mild_lcd/common/types.hpp"
+
+namespace mild {
+
+struct MihParams {
+  // m: number of hash tables, one per substring (seed paper: 16 for loop closure, 24 for sparse match).
+  int num_tables = 16;
+  // r: every bucket within Hamming distance r of the query's substring is probed (0..3).
+  int radius = 0;
+  // Bucket caps (seed paper III.D): a bucket holding more than
+  //   max(min_bucket_cap, bucket_cap_factor * N_features / 2^substring_bits)
+  // entries is discarded: emptied, ignored at query time and never grown again. N_features is
+  // max(expected_features, features currently stored), so the cap never shrinks.
+  bool cap_buckets = true;
+  double bucket_cap_factor = 50.0;
+  uint64_t expected_features = 1000000;
+  uint32_t min_bucket_cap = 64;
+  // Bounded query time as the map grows (0 = off, the default): a bucket keeps only its newest
+  // max_bucket_entries entries, older ones give way as new ones arrive, so a probe never reads more
+  // than about this many ids per bucket however large the map. Common substrings then reach back a
+  // bounded number of keyframes, distinctive (rare) ones to the start of the map. Measured in the
+  // README ("Beyond linear growth").
+  uint32_t max_bucket_entries = 0;
+
+  // Throws InvalidInput naming the first invalid field.
+  void validate() const;
+};
+
+// Work done by one probe pass, summed over query features.
+struct ProbeCounters {
+  uint64_t buckets_probed = 0;
+  uint64_t entries_visited = 0;
+};
+
+// Multi-index hash tables over feature ids. The index stores ids only; descriptors live with the
+// caller (KeyframeDatabase, SparseMatcher), which is what lets a candidate be rejected on its first
+// 64 bits without touching the rest.
+//
+// Layout, per table. Buckets are slots: the substring value itself for substrings up to 20 bits
+// (every slot preallocated), or a slot number handed out on first use for longer substrings.
+// Settled entries sit in one contiguous array, bucket after bucket (compressed sparse rows), so a
+// probe reads a bucket's ids in one sequential run; entries added since the last merge sit in
+// per-bucket chains. When the chains of a table hold more than 1/64 of its settled entries they
+// are merged into the array: each entry is copied a bounded number of times over its life, and
+// no bucket carries the spare capacity (or the 24-byte header) of a vector of its own.
+class MihIndex {
+ public:
+  explicit MihIndex(const MihParams& params);
+
+  const MihParams& params() const { return params_; }
+  const SubstringLayout& layout() const { return layout_; }
+
+  // Adds the features first_id .. first_id+count-1 of one keyframe. Ids must grow from call to call.
+  // Intra-image burstiness: a bucket keeps at most one entry per keyframe, so a feature whose bucket
+  // already holds an entry of this keyframe is not added to that table (it can still be found
+  // through the other tables).
+  void insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id);
+
+  // Bulk loading: while deferred, recent entries are merged into the contiguous runs rarely (each
+  // entry is copied a few times, not ~64), and ending the deferral merges every table. Queries and
+  // results are the same either way.
+  void deferMerges(bool defer);
+
+  // Calls visit(feature_id, table) for every stored id below id_limit in every live bucket within
+  // radius r of q's substrings (in no particular order within a bucket).
+  template <class Visit>
+  void probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+
+  // The same ids appended to `out`, table after table, for callers that process them in bulk.
+  void gather(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, std::vector<FeatureId>& out) const {
+    probe(q, id_limit, counters, [&out](FeatureId id, int) { out.push_back(id); });
+  }
+
+  // True when substring t of a and b are within the probe radius, i.e. the pair meets in table t.
+  bool meetsInTable(const Descriptor& a, const Descriptor& b, int t) const;
+
+  size_t entryCount() const { return entry_count_; }
+  size_t discardedBuckets() const { return discarded_buckets_; }
+  uint64_t evictedEntries() const { return evicted_entries_; }
+  size_t memoryBytes() const;
+  void clear();
+
+ private:
+  static constexpr uint32_t kNone = 0xFFFFFFFFu;       // no slot, or the end of a chain
+  static constexpr uint32_t kDiscarded = 0xFFFFFFFEu;  // in place of a chain: the bucket went over its cap
+
+  struct Link {
+    FeatureId id;
+    uint32_t next;  // older link of the same bucket, or kNone
+    uint32_t slot;  // its bucket, so that merging needs no walk along the chains
+  };
+  // A bucket, in one place: its settled run starts at `offset` and ends where the next slot's
+  // starts; `recent` is its newest recent link, kNone, or kDiscarded; `count` its entries, settled
+  // and recent (for the cap).
+  struct Slot {
+    uint32_t offset;
+    uint32_t recent;
+    uint32_t count;
+  };
+  struct Table {
+    bool dense = true;
+    std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
+    std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
+    std::vector<FeatureId> ids;                      // settled entries, bucket after bucket
+    std::vector<Link> recent;
+    size_t entries = 0;
+
+    uint32_t find(uint64_t key) const;
+    uint32_t findOrAdd(uint64_t key);
+  };
+
+  size_t bucketCap(int t) const;
+  void merge(Table& table);
+  size_t slotCount(const Table& table) const { return table.slots.size() - 1; }
+  static size_t mergeThreshold(const Table& table);
+
+  MihParams params_;
+  SubstringLayout layout_;
+  std::vector<Table> tables_;
+  // XOR masks with popcount <= r, per substring length (index = length).
+  std::vector<std::vector<uint64_t>> probe_masks_;
+  size_t entry_count_ = 0;
+  size_t discarded_buckets_ = 0;
+  uint64_t evicted_entries_ = 0;
+  uint64_t features_seen_ = 0;
+  bool merges_deferred_ = false;
+  // Substrings the keyframe being inserted already put into the table at hand: a small open-
+  // addressing set, emptied by bumping the generation instead of clearing it.
+  struct Seen {
+    uint64_t key = 0;
+    uint32_t generation = 0;
+  };
+  std::vector<Seen> seen_;
+  std::vector<uint64_t> keys_;  // the keyframe's substrings for the table at hand
+  uint32_t seen_generation_ = 0;
+  bool firstInKeyframe(uint64_t key);
+};
+
+template <class Visit>
+void MihIndex::probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
+  // Buckets are scattered in memory. Their slots are requested in a batch first, then their runs,
+  // so that the loads overlap instead of following one another.
+  constexpr size_t kBatch = 64;
+  struct Pending {
+    const Table* table;
+    uint32_t slot;
+    int t;
+  };
+  Pending batch[kBatch];
+  size_t pending = 0;
+  const auto drain = [&] {
+    for (size_t i = 0; i < pending; ++i) {
+      const Slot& s = batch[i].table->slots[batch[i].slot];
+      __builtin_prefetch(batch[i].table->ids.data() + s.offset);
+    }
+    for (size_t i = 0; i < pending; ++i) {
+      const Table& table = *batch[i].table;
+      const Slot& s = table.slots[batch[i].slot];
+      if (s.recent == kDiscarded) continue;
+      const FeatureId* run = table.ids.data() + s.offset;
+      const FeatureId* end = table.ids.data() + table.slots[batch[i].slot + 1].offset;
+      for (; run != end && *run < id_limit; ++run) {  // settled ids ascend within a bucket
+        ++counters.entries_visited;
+        visit(*run, batch[i].t);
+      }
+      for (uint32_t link = s.recent; link != kNone; link = table.recent[link].next) {
+        const FeatureId id = table.recent[link].id;
+        if (id >= id_limit) continue;  // recent ids descend: newest first
+        ++counters.entries_visited;
+        visit(id, batch[i].t);
+      }
+    }
+    pending = 0;
+  };
+  const int m = layout_.count();
+  for (int t = 0; t < m; ++t) {
+    const uint64_t key = layout_.key(q, t);
+    const Table& table = tables_[t];
+    for (uint64_t flip : probe_masks_[layout_.length(t)]) {
+      ++counters.buckets_probed;
+      const uint32_t slot = table.find(key ^ flip);
+      if (slot == kNone) continue;
+      __builtin_prefetch(&table.slots[slot]);
+      batch[pending++] = {&table, slot, t};
+      if (pending == kBatch) drain();
+    }
+  }
+  drain();
+}
+
+}  // namespace mild

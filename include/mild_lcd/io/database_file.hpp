@@ -1,0 +1,68 @@
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "mild_lcd/io/database_directory.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
+
+namespace mild {
+
+// The detector's state in one file, for map reuse across runs.
+//
+// Layout (little-endian). Header, 32 bytes: magic "MILDLCD" + '\0', format version (u32), flags
+// (u32, 0), payload size (u64), CRC-32 of the payload (u32), CRC-32 of the 28 bytes before it
+// (u32). Payload: the saving detector's parameters as "name: value" lines, next id, session start,
+// the keyframes (id, stamp, keypoints, descriptors) and the filter's state. The MIH index is not
+// stored: it is rebuilt from the descriptors on load, with the loading detector's parameters, so a
+// file written with other index parameters cannot be mixed with this index.
+//
+// Saving is crash-safe: the file is written under a temporary name of its own in the same folder
+// (created exclusively, never through a link, locked while written), flushed to disk (fsync), then
+// renamed over the target, so a crash at any moment leaves either the previous file or the new
+// one, both complete. Concurrent saves to one target never share a temporary file: each leaves a
+// complete file, the last rename wins. Temporary files left by killed saves are removed by the next
+// save to the same target (an unlocked one older than a minute).
+constexpr uint32_t kDatabaseFormatVersion = 1;
+// Default bound on the size of a file to load (the node's ~max_database_mb).
+constexpr unsigned long long kDefaultMaxDatabaseBytes = 16ull << 30;
+
+// Throws IoError when the file cannot be written, InvalidInput when something other than a regular
+// file sits at the target; the previous file is kept either way.
+void saveDetector(const LoopDetector& detector, const ConfinedFile& file);
+void saveDetector(const LoopDetector& detector, const std::string& path);
+
+// Reads and checks a file: a regular file only (never a link, FIFO, device or folder); the header
+// (magic, version, payload size against the file's size) before anything else is read or
+// allocated; a file over max_bytes refused (CapacityError) unread; then checksums and every count
+// against the bytes that remain. Throws InvalidInput naming the file and the problem, IoError when
+// it cannot be read, CapacityError when it does not fit (max_bytes, memory); touches no detector.
+DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+DetectorState readDetectorFile(const std::string& path, unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+// The same on bytes in memory; `origin` names them in errors.
+DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin);
+
+struct LoadReport {
+  size_t keyframes = 0;
+  size_t features = 0;
+  double seconds = 0.0;
+  std::string message;  // one line, e.g. for a service reply; says which index parameters differed
+};
+
+// readDetectorFile, then LoopDetector::restore. On any error the detector is left as it was.
+LoadReport loadDetector(LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+                        unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session);
+
+// The same in two steps, for callers that must not hold a lock on the detector for the reading and
+// the index rebuild: prepareLoad touches nothing shared (only the detector's parameters, which never
+// change), commitLoad swaps the prepared state in and cannot fail.
+struct PreparedLoad {
+  PreparedRestore restore;
+  LoadReport report;
+};
+PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+                         unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+void commitLoad(LoopDetector& detector, PreparedLoad&& prepared);
+
+}  // namespace mild

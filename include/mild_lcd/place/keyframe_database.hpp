@@ -1,0 +1,107 @@
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "mild_lcd/features/descriptor.hpp"
+#include "mild_lcd/index/mih_index.hpp"
+#include "mild_lcd/place/similarity.hpp"
+#include "mild_lcd/common/types.hpp"
+
+namespace mild {
+
+enum class SearchMode {
+  kIndex,  // candidates from the MIH tables (the method)
+  kExact,  // every stored feature is a candidate: brute force, the accuracy ceiling
+};
+
+// What one query did. candidates_visited counts index entries read, so a stored feature that meets
+// the query feature in k tables counts k times; votes counts distinct (query, stored) feature pairs
+// within d0 that voted.
+struct QueryStats {
+  uint64_t query_features = 0;
+  uint64_t buckets_probed = 0;
+  uint64_t candidates_visited = 0;
+  uint64_t early_rejections = 0;
+  uint64_t full_distances = 0;
+  uint64_t votes = 0;
+
+  QueryStats& operator+=(const QueryStats& o);
+};
+
+struct QueryResult {
+  std::vector<double> similarity;  // Phi'(query, k) for every keyframe k below the candidate limit
+  QueryStats stats;
+};
+
+struct DatabaseParams {
+  MihParams index;
+  SimilarityParams similarity;
+  void validate() const {
+    index.validate();
+    similarity.validate();
+  }
+};
+
+// The keyframe database: descriptors of every inserted keyframe, the MIH index over them, and
+// image similarity by voting. Keyframes are numbered 0, 1, 2, ... in insertion order.
+//
+// Descriptors are stored split: the first 64 bits of every feature in one array and the remaining
+// 192 in another, so that early termination reads 8 bytes per rejected candidate.
+class KeyframeDatabase {
+ public:
+  explicit KeyframeDatabase(const DatabaseParams& params = {});
+
+  const DatabaseParams& params() const { return params_; }
+  // Similarity parameters do not shape the index, so they can change at any time (live tuning).
+  // Throws InvalidInput, changing nothing, when they are invalid.
+  void setSimilarityParams(const SimilarityParams& params);
+
+  // Adds a keyframe and returns its index. The cv::Mat overload throws InvalidInput (and adds
+  // nothing) unless the matrix is N x 32 CV_8U. A keyframe may have no features.
+  KeyframeIndex insert(const DescriptorList& descriptors);
+  KeyframeIndex insert(const cv::Mat& descriptors);
+  // Many keyframes at once, in order (loading a saved database): the same result as inserting them
+  // one by one, with a single merge of the index at the end.
+  void insertAll(const std::vector<DescriptorList>& keyframes);
+
+  // Similarity of the query to every keyframe k < candidate_limit (all keyframes by default).
+  // Keyframes at or beyond the limit take no part: they neither receive votes nor count in N or N_f.
+  QueryResult query(const DescriptorList& query, KeyframeIndex candidate_limit = kAllKeyframes,
+                    SearchMode mode = SearchMode::kIndex) const;
+  QueryResult query(const cv::Mat& query, KeyframeIndex candidate_limit = kAllKeyframes,
+                    SearchMode mode = SearchMode::kIndex) const;
+
+  // query() against the keyframes stored so far, then insert(). The new keyframe's index is size()-1
+  // afterwards.
+  QueryResult insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit = kAllKeyframes,
+                             SearchMode mode = SearchMode::kIndex);
+
+  size_t size() const { return keyframe_offsets_.size() - 1; }
+  size_t featureCount() const { return heads_.size(); }
+  size_t featureCount(KeyframeIndex k) const { return keyframe_offsets_[k + 1] - keyframe_offsets_[k]; }
+  FeatureId firstFeature(KeyframeIndex k) const { return keyframe_offsets_[k]; }
+  KeyframeIndex keyframeOf(FeatureId f) const;
+  Descriptor descriptor(FeatureId f) const;
+  DescriptorList descriptors(KeyframeIndex k) const;
+
+  const MihIndex& index() const { return index_; }
+  size_t memoryBytes() const;
+  void clear();
+
+ private:
+  using Tail = std::array<uint64_t, kDescriptorWords - 1>;
+  int fullDistance(const Descriptor& q, FeatureId f) const;
+
+  DatabaseParams params_;
+  PhiTable phi_;
+  MihIndex index_;
+  std::vector<uint64_t> heads_;  // first 64 bits of every feature
+  std::vector<Tail> tails_;      // remaining 192 bits
+  std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
+};
+
+}  // namespace mild

@@ -1,0 +1,28 @@
+#pragma once
+
+#include <vector>
+
+#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_match.hpp"
+
+namespace mild {
+
+// Outcome of checking one loop candidate geometrically.
+struct Verification {
+  bool attempted = false;
+  bool verified = false;
+  int matches = 0;      // descriptor matches fed to the geometric model
+  int inliers = 0;      // matches consistent with it
+  double inlier_ratio = 0.0;
+  std::vector<FeatureMatch> inlier_matches;  // the matches consistent with the model
+};
+
+// The seam between loop detection and geometry: given the query's and a candidate's features,
+// decide whether they see the same place.
+class CandidateVerifier {
+ public:
+  virtual ~CandidateVerifier() = default;
+  virtual Verification verify(const Features& query, const Features& candidate) const = 0;
+};
+
+}  // namespace mild

@@ -1,0 +1,224 @@
+#include "mild_lcd/detector/loop_detector.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "mild_lcd/common/errors.hpp"
+
+namespace mild {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+}  // namespace
+
+void CandidateParams::validate() const {
+  if (exclusion_frames < 0) throw InvalidInput("detector/exclusion_frames must be >= 0, got " + std::to_string(exclusion_frames));
+  if (!(exclusion_seconds >= 0.0)) throw InvalidInput("detector/exclusion_seconds must be >= 0");
+  if (max_candidates < 1) throw InvalidInput("detector/max_candidates must be >= 1, got " + std::to_string(max_candidates));
+  if (suppression_radius < 0) throw InvalidInput("detector/suppression_radius must be >= 0");
+  if (!(min_probability >= 0.0 && min_probability <= 1.0)) {
+    throw InvalidInput("detector/min_probability must be in [0, 1], got " + std::to_string(min_probability));
+  }
+}
+
+void DetectorParams::validate() const {
+  orb.validate();
+  database.validate();
+  filter.validate();
+  candidates.validate();
+  if (verification.enabled) verification.validate();
+}
+
+LoopDetector::LoopDetector(const DetectorParams& params)
+    : params_((params.validate(), params)),
+      extractor_(params.orb),
+      database_(params.database),
+      filter_(params.filter) {
+  if (params_.verification.enabled) verifier_ = std::make_unique<GeometricVerifier>(params_.verification);
+}
+
+LoopDetector::~LoopDetector() = default;
+
+void LoopDetector::reset() {
+  database_.clear();
+  filter_.reset();
+  records_.clear();
+  index_of_id_.clear();
+  next_id_ = 0;
+  session_start_ = 0;
+}
+
+void LoopDetector::restore(DetectorState state, bool continue_session) {
+  commitRestore(prepareRestore(std::move(state), continue_session));
+}
+
+PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_session) const {
+  const size_t n = state.records.size();
+  if (state.descriptors.size() != n) throw InvalidInput("state has " + std::to_string(n) + " keyframes but " +
+                                                       std::to_string(state.descriptors.size()) + " descriptor lists");
+  if (state.session_start > n) throw InvalidInput("state's session start lies beyond its keyframes");
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
+  uint64_t largest_id = 0;
+  for (size_t k = 0; k < n; ++k) {
+    const KeyframeRecord& r = state.records[k];
+    if (r.keypoints.size() != state.descriptors[k].size()) {
+      throw InvalidInput("keyframe " + std::to_string(r.id) + " has " + std::to_string(r.keypoints.size()) +
+                         " keypoints but " + std::to_string(state.descriptors[k].size()) + " descriptors");
+    }
+    if (!std::isfinite(r.stamp)) throw InvalidInput("keyframe " + std::to_string(r.id) + " has a non-finite stamp");
+    if (r.id > kMaxKeyframeId) throw InvalidInput("keyframe id " + std::to_string(r.id) + " is above the largest id");
+    if (!index_of_id.emplace(r.id, static_cast<KeyframeIndex>(k)).second) {
+      throw InvalidInput("keyframe id " + std::to_string(r.id) + " appears twice");
+    }
+    largest_id = std::max(largest_id, r.id);
+  }
+  if (n > 0 && state.next_id <= largest_id) throw InvalidInput("state's next id is not above its largest keyframe id");
+
+  KeyframeDatabase database(params_.database);
+  database.insertAll(state.descriptors);
+  LoopFilter filter(params_.filter);
+  if (continue_session) {
+    if (state.posterior.size() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
+    filter.setState(std::move(state.posterior), state.no_loop);
+  }
+  return PreparedRestore{std::move(database), std::move(filter), std::move(state.records), std::move(index_of_id),
+                         state.next_id,
+                         continue_session ? state.session_start : static_cast<KeyframeIndex>(n)};
+}
+
+void LoopDetector::commitRestore(PreparedRestore&& prepared) {
+  database_ = std::move(prepared.database);
+  filter_ = std::move(prepared.filter);
+  records_ = std::move(prepared.records);
+  index_of_id_ = std::move(prepared.index_of_id);
+  next_id_ = prepared.next_id;
+  session_start_ = prepared.session_start;
+}
+
+std::optional<KeyframeIndex> LoopDetector::find(uint64_t id) const {
+  auto it = index_of_id_.find(id);
+  if (it == index_of_id_.end()) return std::nullopt;
+  return it->second;
+}
+
+Features LoopDetector::features(KeyframeIndex k) const {
+  return Features{records_[k].keypoints, database_.descriptors(k)};
+}
+
+size_t LoopDetector::memoryBytes() const {
+  size_t bytes = database_.memoryBytes() + records_.capacity() * sizeof(KeyframeRecord);
+  for (const auto& r : records_) bytes += r.keypoints.capacity() * sizeof(cv::KeyPoint);
+  return bytes + index_of_id_.size() * (sizeof(uint64_t) + sizeof(KeyframeIndex) + 2 * sizeof(void*));
+}
+
+KeyframeIndex LoopDetector::eligibleCount(double stamp) const {
+  // The query will be keyframe n; keyframe j may be a candidate when n - j >= exclusion_frames.
+  const size_t n = records_.size();
+  const size_t frames = static_cast<size_t>(params_.candidates.exclusion_frames);
+  size_t limit = frames == 0 ? n : (n + 1 > frames ? n + 1 - frames : 0);
+  if (limit <= session_start_) return session_start_;  // earlier sessions are never "a moment ago"
+  if (params_.candidates.exclusion_seconds > 0.0) {
+    // Keyframes are stored in arrival order; stamps are expected to grow, so the eligible set is a prefix.
+    const double newest_allowed = stamp - params_.candidates.exclusion_seconds;
+    const auto end = records_.begin() + static_cast<long>(limit);
+    limit = static_cast<size_t>(std::upper_bound(records_.begin(), end, newest_allowed,
+                                                 [](double s, const KeyframeRecord& r) { return s < r.stamp; }) -
+                                records_.begin());
+    limit = std::max<size_t>(limit, session_start_);
+  }
+  return static_cast<KeyframeIndex>(limit);
+}
+
+void LoopDetector::checkId(std::optional<uint64_t> id) const {
+  if (id) {
+    if (*id > kMaxKeyframeId) {
+      throw InvalidInput("keyframe id " + std::to_string(*id) + " is too large (ids must be below 2^64 - 1)");
+    }
+    if (index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+  } else if (next_id_ > kMaxKeyframeId) {
+    throw CapacityError("no keyframe id left to assign (the largest id in use is 2^64 - 2): give ids explicitly");
+  }
+}
+
+DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp, std::optional<uint64_t> id) {
+  checkId(id);
+  const auto start = Clock::now();
+  Features features = extractor_.extract(image, format);
+  const double extract_ms = msSince(start);
+  DetectionResult result = process(std::move(features), stamp, id);
+  result.stats.extract_ms = extract_ms;
+  return result;
+}
+
+DetectionResult LoopDetector::process(Features features, double stamp, std::optional<uint64_t> id) {
+  if (features.keypoints.size() != features.descriptors.size()) {
+    throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
+                       std::to_string(features.descriptors.size()) + " descriptors");
+  }
+  checkId(id);
+  if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
+  DetectionResult result;
+  result.query_id = id ? *id : next_id_;
+  result.stats.features = features.descriptors.size();
+
+  auto start = Clock::now();
+  const KeyframeIndex eligible = eligibleCount(stamp);
+  QueryResult query = database_.insertAndQuery(features.descriptors, eligible, params_.search);
+  result.stats.query_ms = msSince(start);
+  result.stats.query = query.stats;
+  result.stats.eligible_keyframes = eligible;
+
+  result.query_index = static_cast<KeyframeIndex>(records_.size());
+  records_.push_back(KeyframeRecord{result.query_id, stamp, std::move(features.keypoints)});
+  index_of_id_.emplace(result.query_id, result.query_index);
+  next_id_ = std::max(next_id_, result.query_id + 1);
+
+  start = Clock::now();
+  const std::vector<double>& belief = filter_.update(query.similarity);
+  result.candidates = selectCandidates(belief, query.similarity);
+  result.stats.filter_ms = msSince(start);
+
+  if (verifier_ && !result.candidates.empty()) {
+    start = Clock::now();
+    const Features query_features = this->features(result.query_index);
+    for (LoopCandidate& c : result.candidates) c.verification = verifier_->verify(query_features, this->features(c.index));
+    result.stats.verify_ms = msSince(start);
+  }
+  result.similarity = std::move(query.similarity);
+  return result;
+}
+
+std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<double>& belief,
+                                                          const std::vector<double>& similarity) const {
+  const CandidateParams& p = params_.candidates;
+  std::vector<KeyframeIndex> order(belief.size());
+  for (KeyframeIndex j = 0; j < order.size(); ++j) order[j] = j;
+  std::sort(order.begin(), order.end(), [&](KeyframeIndex a, KeyframeIndex b) {
+    return belief[a] != belief[b] ? belief[a] > belief[b] : similarity[a] > similarity[b];
+  });
+  std::vector<LoopCandidate> out;
+  for (KeyframeIndex j : order) {
+    if (out.size() >= static_cast<size_t>(p.max_candidates) || belief[j] < p.min_probability || belief[j] <= 0.0) break;
+    const bool suppressed = std::any_of(out.begin(), out.end(), [&](const LoopCandidate& c) {
+      return (c.index > j ? c.index - j : j - c.index) <= static_cast<KeyframeIndex>(p.suppression_radius);
+    });
+    if (suppressed) continue;
+    LoopCandidate c;
+    c.index = j;
+    c.id = records_[j].id;
+    c.stamp = records_[j].stamp;
+    c.probability = belief[j];
+    c.similarity = similarity[j];
+    out.push_back(c);
+  }
+  return out;
+}
+
+}  // namespace mild

@@ -1,0 +1,239 @@
+#include "mild_lcd/index/mih_index.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "mild_lcd/common/errors.hpp"
+
+namespace mild {
+namespace {
+
+constexpr int kMaxRadius = 3;
+// Substrings up to this many bits get a directly addressed table (2^20 buckets at most);
+// longer ones a hash map.
+constexpr int kMaxDenseBits = 20;
+
+void addMasks(int length, int radius, int first_bit, uint64_t mask, std::vector<uint64_t>& out) {
+  out.push_back(mask);
+  if (radius == 0) return;
+  for (int b = first_bit; b < length; ++b) addMasks(length, radius - 1, b + 1, mask | (uint64_t{1} << b), out);
+}
+
+}  // namespace
+
+void MihParams::validate() const {
+  if (num_tables < SubstringLayout::kMinSubstrings || num_tables > SubstringLayout::kMaxSubstrings) {
+    throw InvalidInput("index/num_tables must be in [" + std::to_string(SubstringLayout::kMinSubstrings) + ", " +
+                       std::to_string(SubstringLayout::kMaxSubstrings) + "], got " + std::to_string(num_tables));
+  }
+  if (radius < 0 || radius > kMaxRadius) {
+    throw InvalidInput("index/radius must be in [0, " + std::to_string(kMaxRadius) + "], got " + std::to_string(radius));
+  }
+  if (!(bucket_cap_factor > 0.0) || !std::isfinite(bucket_cap_factor)) {
+    throw InvalidInput("index/bucket_cap_factor must be a positive number, got " + std::to_string(bucket_cap_factor));
+  }
+  if (min_bucket_cap < 1) throw InvalidInput("index/min_bucket_cap must be at least 1");
+  if (max_bucket_entries == 1) throw InvalidInput("index/max_bucket_entries must be 0 (off) or at least 2");
+}
+
+size_t MihIndex::mergeThreshold(const Table& table) {
+  // Recent entries cost a dependent load each at query time; 1/64 of the settled ones keeps them
+  // rare while each entry is copied about 64 times over its life (a memmove, cheap).
+  return std::max<size_t>(4096, table.ids.size() / 64);
+}
+
+uint32_t MihIndex::Table::find(uint64_t key) const {
+  if (dense) return static_cast<uint32_t>(key);
+  auto it = slot_of.find(key);
+  return it == slot_of.end() ? kNone : it->second;
+}
+
+uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
+  if (dense) return static_cast<uint32_t>(key);
+  auto [it, added] = slot_of.emplace(key, static_cast<uint32_t>(slots.size() - 1));
+  if (added) slots.insert(slots.end() - 1, Slot{slots.back().offset, kNone, 0});  // before the end sentinel
+  return it->second;
+}
+
+MihIndex::MihIndex(const MihParams& params) : params_(params), layout_((params.validate(), params.num_tables)) {
+  probe_masks_.resize(layout_.maxLength() + 1);
+  for (int t = 0; t < layout_.count(); ++t) {
+    const int len = layout_.length(t);
+    if (probe_masks_[len].empty()) addMasks(len, std::min(params_.radius, len), 0, 0, probe_masks_[len]);
+  }
+  clear();
+}
+
+void MihIndex::clear() {
+  tables_.assign(layout_.count(), Table{});
+  for (int t = 0; t < layout_.count(); ++t) {
+    Table& table = tables_[t];
+    table.dense = layout_.length(t) <= kMaxDenseBits;
+    const size_t slots = table.dense ? size_t{1} << layout_.length(t) : 0;
+    table.slots.assign(slots + 1, Slot{0, kNone, 0});
+  }
+  entry_count_ = 0;
+  discarded_buckets_ = 0;
+  features_seen_ = 0;
+}
+
+size_t MihIndex::bucketCap(int t) const {
+  const double n_features = static_cast<double>(std::max<uint64_t>(params_.expected_features, features_seen_));
+  const double average = n_features / std::ldexp(1.0, layout_.length(t));
+  return std::max<size_t>(params_.min_bucket_cap, static_cast<size_t>(params_.bucket_cap_factor * average));
+}
+
+bool MihIndex::firstInKeyframe(uint64_t key) {
+  const size_t mask = seen_.size() - 1;
+  for (size_t h = (key * 0x9E3779B97F4A7C15ull) >> 40 & mask;; h = (h + 1) & mask) {
+    Seen& s = seen_[h];
+    if (s.generation != seen_generation_) {
+      s = {key, seen_generation_};
+      return true;
+    }
+    if (s.key == key) return false;
+  }
+}
+
+void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id) {
+  features_seen_ += count;
+  size_t capacity = 1024;
+  while (capacity < 2 * count) capacity *= 2;  // at most half full: short probe sequences
+  if (seen_.size() < capacity) seen_.assign(capacity, Seen{});
+  for (int t = 0; t < layout_.count(); ++t) {
+    Table& table = tables_[t];
+    const size_t cap = bucketCap(t);
+    if (++seen_generation_ == 0) {  // wrapped: old stamps could look current
+      std::fill(seen_.begin(), seen_.end(), Seen{});
+      seen_generation_ = 1;
+    }
+    keys_.resize(count);
+    for (size_t i = 0; i < count; ++i) keys_[i] = layout_.key(descriptors[i], t);
+    constexpr size_t kAhead = 8;  // buckets are scattered: request them a few features ahead
+    for (size_t i = 0; i < count; ++i) {
+      if (table.dense && i + kAhead < count) __builtin_prefetch(&table.slots[keys_[i + kAhead]]);
+      const uint64_t key = keys_[i];
+      // Intra-image burstiness: the keyframe's first feature in a bucket is its only entry there.
+      if (!firstInKeyframe(key)) continue;
+      const uint32_t s = table.findOrAdd(key);
+      Slot& slot = table.slots[s];
+      if (slot.recent == kDiscarded) continue;
+      if (params_.cap_buckets && slot.count >= cap) {
+        // Discarded: ignored from now on; its entries leave memory at the next merge.
+        entry_count_ -= slot.count;
+        table.entries -= slot.count;
+        slot.count = 0;
+        slot.recent = kDiscarded;
+        ++discarded_buckets_;
+        continue;
+      }
+      table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s});
+      slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
+      if (params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries &&
+          slot.offset < table.slots[s + 1].offset) {
+        ++slot.offset;  // the oldest settled entry gives way (the merge drops recent ones over the bound)
+        ++evicted_entries_;
+        continue;
+      }
+      ++slot.count;
+      ++table.entries;
+      ++entry_count_;
+    }
+    // Bulk loading merges rarely (each entry is copied a few times instead of ~64), live insertion
+    // often (recent entries are slower to probe).
+    const size_t threshold = merges_deferred_ ? std::max<size_t>(1 << 16, table.ids.size() / 4) : mergeThreshold(table);
+    if (table.recent.size() > threshold) merge(table);
+  }
+}
+
+void MihIndex::deferMerges(bool defer) {
+  merges_deferred_ = defer;
+  if (!defer) {
+    for (Table& table : tables_) {
+      if (!table.recent.empty()) merge(table);
+    }
+  }
+}
+
+void MihIndex::merge(Table& table) {
+  // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
+  // ids, so scattering them in that order keeps every bucket's ids ascending.
+  const size_t slots = slotCount(table);
+  const uint32_t bound = params_.max_bucket_entries;
+  std::vector<uint32_t> start(slots + 1, 0), recent_in(slots, 0);
+  for (const Link& link : table.recent) {
+    if (table.slots[link.slot].recent != kDiscarded) ++recent_in[link.slot];
+  }
+  // Over the bound (max_bucket_entries), a bucket's oldest entries go: settled ones first.
+  std::vector<uint32_t> skip_recent(bound > 0 ? slots : 0, 0);
+  for (size_t s = 0; s < slots; ++s) {
+    Slot& slot = table.slots[s];
+    uint32_t settled = slot.recent == kDiscarded ? 0 : table.slots[s + 1].offset - slot.offset;
+    if (bound > 0 && settled + recent_in[s] > bound) {
+      uint32_t excess = settled + recent_in[s] - bound;
+      const uint32_t from_settled = std::min(excess, settled);
+      slot.offset += from_settled;
+      settled -= from_settled;
+      excess -= from_settled;
+      skip_recent[s] = excess;
+      evicted_entries_ += from_settled + excess;
+      table.entries -= from_settled + excess;
+      entry_count_ -= from_settled + excess;
+    }
+    start[s + 1] = start[s] + settled + recent_in[s] - (bound > 0 ? skip_recent[s] : 0);
+  }
+  std::vector<FeatureId> ids(start[slots]);
+  for (size_t s = 0; s < slots; ++s) {  // settled runs first, then room for the recent ones
+    Slot& slot = table.slots[s];
+    if (slot.recent != kDiscarded) {
+      const FeatureId* run = table.ids.data() + slot.offset;
+      const uint32_t settled = table.slots[s + 1].offset - slot.offset;
+      std::copy(run, run + settled, ids.begin() + start[s]);
+      slot.offset = start[s] + settled;  // the write cursor for its recent entries, for now
+    } else {
+      slot.offset = start[s];
+    }
+  }
+  for (const Link& link : table.recent) {
+    Slot& slot = table.slots[link.slot];
+    if (slot.recent == kDiscarded) continue;
+    if (bound > 0 && skip_recent[link.slot] > 0) {
+      --skip_recent[link.slot];
+      continue;
+    }
+    ids[slot.offset++] = link.id;
+  }
+  for (size_t s = 0; s < slots; ++s) {
+    Slot& slot = table.slots[s];
+    slot.offset = start[s];
+    if (slot.recent != kDiscarded) {
+      slot.recent = kNone;
+      slot.count = start[s + 1] - start[s];
+    }
+  }
+  table.slots[slots].offset = start[slots];
+  table.ids = std::move(ids);
+  table.recent.clear();
+  if (table.recent.capacity() > 2 * mergeThreshold(table)) {  // after a bulk load: give the room back
+    std::vector<Link>().swap(table.recent);
+  }
+}
+
+bool MihIndex::meetsInTable(const Descriptor& a, const Descriptor& b, int t) const {
+  return popcount64(layout_.key(a, t) ^ layout_.key(b, t)) <= params_.radius;
+}
+
+size_t MihIndex::memoryBytes() const {
+  size_t bytes = sizeof(*this);
+  for (const Table& table : tables_) {
+    bytes += sizeof(Table) + table.slots.capacity() * sizeof(Slot) + table.ids.capacity() * sizeof(FeatureId) +
+             table.recent.capacity() * sizeof(Link);
+    // unordered_map nodes: key, value, next pointer and cached hash, plus one bucket pointer each
+    bytes += table.slot_of.size() * (sizeof(uint64_t) + sizeof(uint32_t) + 2 * sizeof(void*)) +
+             table.slot_of.bucket_count() * sizeof(void*);
+  }
+  return bytes;
+}
+
+}  // namespace mild

@@ -1,0 +1,470 @@
+#include "mild_lcd/io/database_file.hpp"
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstdio>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <optional>
+#include <sstream>
+
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/params/parameters.hpp"
+
+namespace mild {
+namespace {
+
+
+constexpr char kMagic[8] = {'M', 'I', 'L', 'D', 'L', 'C', 'D', '\0'};
+constexpr size_t kHeaderBytes = 32;
+constexpr size_t kKeypointBytes = 6 * 4;
+
+uint32_t crc(uint32_t running, const uint8_t* data, size_t size) {
+  while (size > 0) {  // zlib takes 32-bit lengths
+    const uInt chunk = static_cast<uInt>(std::min<size_t>(size, 1u << 30));
+    running = static_cast<uint32_t>(crc32(running, data, chunk));
+    data += chunk;
+    size -= chunk;
+  }
+  return running;
+}
+
+template <class T>
+void putRaw(std::vector<uint8_t>& out, const T& v) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  const auto* p = reinterpret_cast<const uint8_t*>(&v);
+  out.insert(out.end(), p, p + sizeof(T));
+}
+
+std::string errnoText() { return std::strerror(errno); }
+
+// Buffered writes to a file descriptor, with the payload's CRC kept along the way.
+class PayloadWriter {
+ public:
+  PayloadWriter(int fd, const std::string& path) : fd_(fd), path_(path) { buffer_.reserve(kFlushAt + 4096); }
+
+  template <class T>
+  void put(const T& v) {
+    putRaw(buffer_, v);
+    maybeFlush();
+  }
+  void putBytes(const void* data, size_t size) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    buffer_.insert(buffer_.end(), p, p + size);
+    maybeFlush();
+  }
+  void flush() {
+    crc_ = crc(crc_, buffer_.data(), buffer_.size());
+    size_ += buffer_.size();
+    size_t done = 0;
+    while (done < buffer_.size()) {
+      const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw IoError(path_ + ": cannot write (" + errnoText() + ")");
+      done += static_cast<size_t>(n);
+    }
+    buffer_.clear();
+  }
+  uint64_t size() const { return size_; }
+  uint32_t checksum() const { return crc_; }
+
+ private:
+  static constexpr size_t kFlushAt = 1 << 20;
+  void maybeFlush() {
+    if (buffer_.size() >= kFlushAt) flush();
+  }
+  int fd_;
+  std::string path_;
+  std::vector<uint8_t> buffer_;
+  uint64_t size_ = 0;
+  uint32_t crc_ = static_cast<uint32_t>(crc32(0, nullptr, 0));
+};
+
+void writePayload(const LoopDetector& detector, PayloadWriter& w) {
+  std::string parameters;
+  for (const auto& [name, value] : describeParameters(detector.params())) parameters += name + ": " + value + "\n";
+  w.put(static_cast<uint32_t>(parameters.size()));
+  w.putBytes(parameters.data(), parameters.size());
+  w.put(detector.nextId());
+  w.put(static_cast<uint32_t>(detector.sessionStart()));
+  w.put(static_cast<uint32_t>(detector.size()));
+  for (KeyframeIndex k = 0; k < detector.size(); ++k) {
+    const KeyframeRecord& r = detector.record(k);
+    w.put(r.id);
+    w.put(r.stamp);
+    w.put(static_cast<uint32_t>(r.keypoints.size()));
+    for (const cv::KeyPoint& p : r.keypoints) {
+      w.put(p.pt.x);
+      w.put(p.pt.y);
+      w.put(p.size);
+      w.put(p.angle);
+      w.put(p.response);
+      w.put(static_cast<int32_t>(p.octave));
+    }
+    const DescriptorList descriptors = detector.database().descriptors(k);
+    w.putBytes(descriptors.data(), descriptors.size() * sizeof(Descriptor));
+  }
+  const std::vector<double>& posterior = detector.filter().posterior();
+  w.put(static_cast<uint32_t>(posterior.size()));
+  w.putBytes(posterior.data(), posterior.size() * sizeof(double));
+  w.put(detector.filter().noLoopProbability());
+  w.flush();
+}
+
+// Reads fixed-size values from the payload, refusing to run past its end.
+class Cursor {
+ public:
+  Cursor(const uint8_t* data, size_t size, const std::string& origin) : p_(data), end_(data + size), origin_(origin) {}
+
+  template <class T>
+  T get(const char* what) {
+    need(sizeof(T), what);
+    T v;
+    std::memcpy(&v, p_, sizeof(T));
+    p_ += sizeof(T);
+    return v;
+  }
+  const uint8_t* take(size_t bytes, const char* what) {
+    need(bytes, what);
+    const uint8_t* start = p_;
+    p_ += bytes;
+    return start;
+  }
+  // A count of items of `item_bytes` each that must fit in what is left.
+  size_t count(size_t item_bytes, const char* what) {
+    const uint32_t n = get<uint32_t>(what);
+    if (item_bytes > 0 && n > remaining() / item_bytes) {
+      throw InvalidInput(origin_ + ": corrupt: " + what + " says " + std::to_string(n) + " but only " +
+                         std::to_string(remaining()) + " bytes remain");
+    }
+    return n;
+  }
+  size_t remaining() const { return static_cast<size_t>(end_ - p_); }
+
+ private:
+  void need(size_t bytes, const char* what) const {
+    if (bytes > remaining()) throw InvalidInput(origin_ + ": corrupt: ends inside " + std::string(what));
+  }
+  const uint8_t* p_;
+  const uint8_t* end_;
+  std::string origin_;
+};
+
+std::map<std::string, std::string> parameterLines(const std::string& text) {
+  std::map<std::string, std::string> out;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto colon = line.find(": ");
+    if (colon != std::string::npos) out[line.substr(0, colon)] = line.substr(colon + 2);
+  }
+  return out;
+}
+
+}  // namespace
+
+namespace {
+
+// Temporary files of saves to `target`: "<target>.tmp.<8 hex digits>".
+std::string temporaryPrefix(const std::string& target) { return target + ".tmp."; }
+
+std::string randomSuffix() {
+  static std::atomic<uint64_t> counter{0};
+  uint64_t x = static_cast<uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count()) ^
+               (static_cast<uint64_t>(::getpid()) << 32) ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdull;
+  x ^= x >> 33;
+  char text[17];
+  std::snprintf(text, sizeof(text), "%016llx", static_cast<unsigned long long>(x));
+  return std::string(text, 8);
+}
+
+// Removes temporary files that killed saves left behind. A save in progress holds an exclusive lock
+// on its file, so a file whose lock can be taken is abandoned; the age test covers the instant
+// between a save creating its file and locking it.
+void removeStaleTemporaries(const ConfinedFile& file) {
+  const int dup_fd = ::dup(file.folder());
+  if (dup_fd < 0) return;
+  DIR* dir = ::fdopendir(dup_fd);
+  if (dir == nullptr) {
+    ::close(dup_fd);
+    return;
+  }
+  const std::string prefix = temporaryPrefix(file.name());
+  const auto now = std::chrono::system_clock::now();
+  std::vector<std::string> stale;
+  while (const dirent* entry = ::readdir(dir)) {
+    const std::string name = entry->d_name;
+    if (name.size() != prefix.size() + 8 || name.compare(0, prefix.size(), prefix) != 0) continue;
+    const int fd = ::openat(file.folder(), name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) continue;  // a link or a vanished file: not ours to remove
+    struct stat st {};
+    const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+    const auto modified = std::chrono::system_clock::from_time_t(st.st_mtime);
+    if (regular && now - modified > std::chrono::seconds(60) && ::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      stale.push_back(name);
+    }
+    ::close(fd);
+  }
+  ::closedir(dir);
+  for (const std::string& name : stale) ::unlinkat(file.folder(), name.c_str(), 0);
+}
+
+// A new temporary file beside the target, created exclusively (never an existing file or a link)
+// and locked for the duration of the save.
+int createTemporary(const ConfinedFile& file, std::string& name) {
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    name = temporaryPrefix(file.name()) + randomSuffix();
+    const int fd = ::openat(file.folder(), name.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+    if (fd >= 0) {
+      ::flock(fd, LOCK_EX);
+      return fd;
+    }
+    if (errno != EEXIST) break;
+  }
+  throw IoError(file.display() + ": cannot create a temporary file beside it (" + errnoText() + ")");
+}
+
+void writeAll(int fd, const std::vector<uint8_t>& bytes, off_t offset, const std::string& display) {
+  size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::pwrite(fd, bytes.data() + done, bytes.size() - done, offset + static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError(display + ": cannot write (" + errnoText() + ")");
+    done += static_cast<size_t>(n);
+  }
+}
+
+}  // namespace
+
+void saveDetector(const LoopDetector& detector, const std::string& path) { saveDetector(detector, fileAtPath(path)); }
+
+void saveDetector(const LoopDetector& detector, const ConfinedFile& file) {
+  file.refuseIfNotRegular();
+  removeStaleTemporaries(file);
+  std::string tmp;
+  const int fd = createTemporary(file, tmp);
+  try {
+    std::vector<uint8_t> header(kHeaderBytes, 0);
+    writeAll(fd, header, 0, file.display());
+    if (::lseek(fd, static_cast<off_t>(kHeaderBytes), SEEK_SET) < 0) throw IoError(file.display() + ": cannot seek");
+    PayloadWriter writer(fd, file.display());
+    writePayload(detector, writer);
+
+    header.clear();
+    header.insert(header.end(), kMagic, kMagic + sizeof(kMagic));
+    putRaw(header, kDatabaseFormatVersion);
+    putRaw(header, uint32_t{0});
+    putRaw(header, writer.size());
+    putRaw(header, writer.checksum());
+    putRaw(header, crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), header.data(), header.size()));
+    writeAll(fd, header, 0, file.display());
+    if (::fsync(fd) != 0) throw IoError(file.display() + ": cannot flush to disk (" + errnoText() + ")");
+  } catch (...) {
+    ::unlinkat(file.folder(), tmp.c_str(), 0);
+    ::close(fd);
+    throw;
+  }
+  // Renamed while still locked: the temporary file is never unlocked under its temporary name.
+  if (::renameat(file.folder(), tmp.c_str(), file.folder(), file.name().c_str()) != 0) {
+    const std::string why = errnoText();
+    ::unlinkat(file.folder(), tmp.c_str(), 0);
+    ::close(fd);
+    throw IoError(file.display() + ": cannot replace the file (" + why + ")");
+  }
+  ::close(fd);
+  ::fsync(file.folder());  // the rename itself must reach the disk too
+}
+
+DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin) {
+  if (size == 0) throw InvalidInput(origin + ": empty file, not a mild_lcd database");
+  if (size < kHeaderBytes || std::memcmp(data, kMagic, sizeof(kMagic)) != 0) {
+    throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
+  }
+  Cursor header(data, kHeaderBytes, origin);
+  header.take(sizeof(kMagic), "the magic");
+  const uint32_t version = header.get<uint32_t>("the version");
+  const uint32_t flags = header.get<uint32_t>("the flags");
+  const uint64_t payload_size = header.get<uint64_t>("the payload size");
+  const uint32_t payload_crc = header.get<uint32_t>("the payload checksum");
+  const uint32_t header_crc = header.get<uint32_t>("the header checksum");
+#ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION  // the fuzzer must get past the checksums
+  if (crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), data, kHeaderBytes - 4) != header_crc) {
+    throw InvalidInput(origin + ": corrupt header (checksum mismatch)");
+  }
+#else
+  (void)header_crc;
+  (void)payload_crc;
+#endif
+  if (version != kDatabaseFormatVersion) {
+    throw InvalidInput(origin + ": database format version " + std::to_string(version) + "; this mild_lcd reads version " +
+                       std::to_string(kDatabaseFormatVersion));
+  }
+  if (flags != 0) throw InvalidInput(origin + ": unknown format flags " + std::to_string(flags));
+  if (payload_size != size - kHeaderBytes) {
+    throw InvalidInput(origin + ": truncated or padded: the header announces " + std::to_string(payload_size) +
+                       " bytes of data, the file holds " + std::to_string(size - kHeaderBytes));
+  }
+  const uint8_t* payload = data + kHeaderBytes;
+#ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
+  if (crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), payload, payload_size) != payload_crc) {
+    throw InvalidInput(origin + ": corrupt data (checksum mismatch)");
+  }
+#endif
+
+  Cursor in(payload, payload_size, origin);
+  DetectorState state;
+  const size_t text = in.count(1, "the parameters");
+  const uint8_t* chars = in.take(text, "the parameters");
+  state.parameters.assign(reinterpret_cast<const char*>(chars), text);
+  state.next_id = in.get<uint64_t>("the next id");
+  state.session_start = in.get<uint32_t>("the session start");
+  const size_t keyframes = in.count(8 + 8 + 4, "the keyframe count");
+  state.records.resize(keyframes);
+  state.descriptors.resize(keyframes);
+  for (size_t k = 0; k < keyframes; ++k) {
+    KeyframeRecord& r = state.records[k];
+    r.id = in.get<uint64_t>("a keyframe id");
+    r.stamp = in.get<double>("a keyframe stamp");
+    const size_t features = in.count(kKeypointBytes + kDescriptorBytes, "a keyframe's feature count");
+    r.keypoints.resize(features);
+    for (cv::KeyPoint& p : r.keypoints) {
+      p.pt.x = in.get<float>("a keypoint");
+      p.pt.y = in.get<float>("a keypoint");
+      p.size = in.get<float>("a keypoint");
+      p.angle = in.get<float>("a keypoint");
+      p.response = in.get<float>("a keypoint");
+      p.octave = in.get<int32_t>("a keypoint");
+    }
+    state.descriptors[k].resize(features);
+    const uint8_t* descriptors = in.take(features * kDescriptorBytes, "descriptors");
+    if (features > 0) std::memcpy(state.descriptors[k].data(), descriptors, features * kDescriptorBytes);
+  }
+  const size_t posterior = in.count(sizeof(double), "the filter state size");
+  state.posterior.resize(posterior);
+  const uint8_t* beliefs = in.take(posterior * sizeof(double), "the filter state");
+  if (posterior > 0) std::memcpy(state.posterior.data(), beliefs, posterior * sizeof(double));  // no null pointers to memcpy
+  state.no_loop = in.get<double>("the filter state");
+  if (in.remaining() != 0) throw InvalidInput(origin + ": corrupt: " + std::to_string(in.remaining()) + " stray bytes");
+  return state;
+}
+
+namespace {
+
+void readExactly(int fd, uint8_t* data, size_t size, off_t offset, const std::string& display) {
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::pread(fd, data + done, size - done, offset + static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw IoError(display + ": read error (" + errnoText() + ")");
+    if (n == 0) throw InvalidInput(display + ": truncated while reading (the file shrank)");
+    done += static_cast<size_t>(n);
+  }
+}
+
+// Closes the descriptor on every path out.
+struct FdCloser {
+  int fd;
+  ~FdCloser() { ::close(fd); }
+};
+
+}  // namespace
+
+DetectorState readDetectorFile(const std::string& path, unsigned long long max_bytes) {
+  return readDetectorFile(fileAtPath(path), max_bytes);
+}
+
+DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_bytes) {
+  unsigned long long size = 0;
+  const FdCloser fd{file.openForReading(size)};
+  const std::string& origin = file.display();
+  if (size == 0) throw InvalidInput(origin + ": empty file, not a mild_lcd database");
+  // The header first: a huge or sparse file that is not a database costs 32 bytes, not its size.
+  std::vector<uint8_t> header(kHeaderBytes, 0);
+  if (size < kHeaderBytes) throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
+  readExactly(fd.fd, header.data(), kHeaderBytes, 0, origin);
+  if (std::memcmp(header.data(), kMagic, sizeof(kMagic)) != 0) {
+    throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
+  }
+  uint64_t payload_size = 0;
+  std::memcpy(&payload_size, header.data() + 16, sizeof(payload_size));
+  if (payload_size != size - kHeaderBytes) {
+    throw InvalidInput(origin + ": truncated or padded: the header announces " + std::to_string(payload_size) +
+                       " bytes of data, the file holds " + std::to_string(size - kHeaderBytes));
+  }
+  if (size > max_bytes) {
+    throw CapacityError(origin + ": " + std::to_string(size >> 20) + " MB, over the " + std::to_string(max_bytes >> 20) +
+                        " MB allowed (~max_database_mb)");
+  }
+  try {
+    std::vector<uint8_t> bytes(static_cast<size_t>(size));
+    std::memcpy(bytes.data(), header.data(), kHeaderBytes);
+    readExactly(fd.fd, bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes, static_cast<off_t>(kHeaderBytes), origin);
+    return parseDetectorState(bytes.data(), bytes.size(), origin);
+  } catch (const std::bad_alloc&) {
+    throw CapacityError(origin + ": not enough memory to load a database of " + std::to_string(size >> 20) + " MB");
+  }
+}
+
+PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+                         unsigned long long max_bytes) {
+  const auto start = std::chrono::steady_clock::now();
+  DetectorState state = readDetectorFile(file, max_bytes);
+  LoadReport report;
+  report.keyframes = state.records.size();
+  for (const auto& d : state.descriptors) report.features += d.size();
+
+  // The index is rebuilt with this detector's parameters; say so when the file's differ.
+  const auto saved = parameterLines(state.parameters);
+  std::string differing;
+  for (const auto& [name, value] : describeParameters(detector.params())) {
+    if (name.compare(0, 6, "index/") != 0) continue;
+    auto it = saved.find(name);
+    if (it != saved.end() && it->second != value) {
+      differing += (differing.empty() ? "" : ", ") + name + " " + it->second + " -> " + value;
+    }
+  }
+  std::optional<PreparedRestore> restore;
+  try {
+    restore.emplace(detector.prepareRestore(std::move(state), continue_session));
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(file.display() + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    throw CapacityError(file.display() + ": not enough memory to rebuild the index of " + std::to_string(report.keyframes) +
+                        " keyframes");
+  }
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::ostringstream msg;
+  msg.precision(3);
+  msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << file.display()
+      << " in " << report.seconds << " s" << (continue_session ? ", continuing the saved session" : ", as a new session");
+  if (!differing.empty()) msg << "; index rebuilt with this node's parameters (" << differing << ")";
+  report.message = msg.str();
+  return PreparedLoad{std::move(*restore), std::move(report)};
+}
+
+void commitLoad(LoopDetector& detector, PreparedLoad&& prepared) { detector.commitRestore(std::move(prepared.restore)); }
+
+LoadReport loadDetector(LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+                        unsigned long long max_bytes) {
+  PreparedLoad prepared = prepareLoad(detector, file, continue_session, max_bytes);
+  LoadReport report = prepared.report;
+  commitLoad(detector, std::move(prepared));
+  return report;
+}
+
+LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session) {
+  return loadDetector(detector, fileAtPath(path), continue_session);
+}
+
+}  // namespace mild

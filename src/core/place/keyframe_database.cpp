@@ -1,0 +1,253 @@
+#include "mild_lcd/place/keyframe_database.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "mild_lcd/common/errors.hpp"
+
+namespace mild {
+namespace {
+
+struct Vote {
+  FeatureId feature;
+  KeyframeIndex keyframe;
+  double phi;
+};
+
+// A stored feature that meets the query feature in several tables is still one candidate.
+// Only votes (pairs within d0) need this, and they are few, so sorting beats a visited-mark
+// array over every stored feature.
+void removeDuplicateVotes(std::vector<Vote>& votes) {
+  if (votes.size() < 2) return;
+  std::sort(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature < b.feature; });
+  votes.erase(std::unique(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature == b.feature; }),
+              votes.end());
+}
+
+// Turns the votes of one query feature into per-keyframe similarity (the burstiness weighting of
+// SimilarityParams) and adds them up.
+class VoteAccumulator {
+ public:
+  VoteAccumulator(const SimilarityParams& params, KeyframeIndex keyframes, std::vector<double>& similarity)
+      : params_(params), n_(keyframes), similarity_(similarity), last_feature_(keyframes, 0) {}
+
+  void addFeatureVotes(const std::vector<Vote>& votes) {
+    if (votes.empty()) return;
+    ++feature_counter_;
+    double weight = 1.0;
+    if (params_.idf_weighting) {
+      uint32_t keyframes_hit = 0;
+      for (const Vote& v : votes) {
+        if (last_feature_[v.keyframe] != feature_counter_) {
+          last_feature_[v.keyframe] = feature_counter_;
+          ++keyframes_hit;
+        }
+      }
+      weight *= std::log(static_cast<double>(n_) / keyframes_hit);
+    }
+    if (params_.vote_normalization) {
+      double mass = params_.burstiness_regularizer;
+      for (const Vote& v : votes) mass += v.phi;
+      if (!(mass > 0.0)) return;
+      weight /= mass;
+    }
+    for (const Vote& v : votes) similarity_[v.keyframe] += weight * v.phi;
+  }
+
+ private:
+  const SimilarityParams& params_;
+  const KeyframeIndex n_;
+  std::vector<double>& similarity_;
+  std::vector<uint32_t> last_feature_;
+  uint32_t feature_counter_ = 0;
+};
+
+}  // namespace
+
+QueryStats& QueryStats::operator+=(const QueryStats& o) {
+  query_features += o.query_features;
+  buckets_probed += o.buckets_probed;
+  candidates_visited += o.candidates_visited;
+  early_rejections += o.early_rejections;
+  full_distances += o.full_distances;
+  votes += o.votes;
+  return *this;
+}
+
+KeyframeDatabase::KeyframeDatabase(const DatabaseParams& params)
+    : params_((params.validate(), params)), phi_(params.similarity), index_(params.index) {
+  keyframe_offsets_.push_back(0);
+}
+
+void KeyframeDatabase::setSimilarityParams(const SimilarityParams& params) {
+  params.validate();
+  params_.similarity = params;
+  phi_ = PhiTable(params);
+}
+
+void KeyframeDatabase::clear() {
+  index_.clear();
+  heads_.clear();
+  tails_.clear();
+  keyframe_offsets_.assign(1, 0);
+}
+
+KeyframeIndex KeyframeDatabase::insert(const cv::Mat& descriptors) { return insert(descriptorsFromMat(descriptors)); }
+
+KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
+  const uint64_t total = static_cast<uint64_t>(featureCount()) + descriptors.size();
+  if (total >= std::numeric_limits<FeatureId>::max() || size() + 1 >= kAllKeyframes) {
+    throw InvalidInput("keyframe database is full (2^32 features or keyframes)");
+  }
+  const KeyframeIndex k = static_cast<KeyframeIndex>(size());
+  const FeatureId first = static_cast<FeatureId>(featureCount());
+  if (total > heads_.capacity()) {
+    // Grow by a quarter rather than double: descriptors are most of the memory, and doubling would
+    // leave up to half of it unused (an extra 16 bytes per feature on average).
+    const size_t grown = std::max<size_t>(total, heads_.capacity() + heads_.capacity() / 4 + 1024);
+    heads_.reserve(grown);
+    tails_.reserve(grown);
+  }
+  for (const Descriptor& d : descriptors) {
+    heads_.push_back(d.words[0]);
+    tails_.push_back({d.words[1], d.words[2], d.words[3]});
+  }
+  index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
+  keyframe_offsets_.push_back(static_cast<FeatureId>(total));
+  return k;
+}
+
+KeyframeIndex KeyframeDatabase::keyframeOf(FeatureId f) const {
+  // keyframe_offsets_ ascends; keyframe k owns [offsets[k], offsets[k+1]).
+  const auto it = std::upper_bound(keyframe_offsets_.begin(), keyframe_offsets_.end(), f);
+  return static_cast<KeyframeIndex>(it - keyframe_offsets_.begin() - 1);
+}
+
+int KeyframeDatabase::fullDistance(const Descriptor& q, FeatureId f) const {
+  const Tail& tail = tails_[f];
+  return popcount64(q.words[0] ^ heads_[f]) + popcount64(q.words[1] ^ tail[0]) + popcount64(q.words[2] ^ tail[1]) +
+         popcount64(q.words[3] ^ tail[2]);
+}
+
+void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
+  size_t total = featureCount();
+  for (const auto& k : keyframes) total += k.size();
+  heads_.reserve(total);
+  tails_.reserve(total);
+  keyframe_offsets_.reserve(keyframe_offsets_.size() + keyframes.size());
+  index_.deferMerges(true);
+  try {
+    for (const auto& k : keyframes) insert(k);
+  } catch (...) {
+    index_.deferMerges(false);
+    throw;
+  }
+  index_.deferMerges(false);
+}
+
+Descriptor KeyframeDatabase::descriptor(FeatureId f) const {
+  Descriptor d;
+  d.words[0] = heads_[f];
+  for (int w = 1; w < kDescriptorWords; ++w) d.words[w] = tails_[f][w - 1];
+  return d;
+}
+
+DescriptorList KeyframeDatabase::descriptors(KeyframeIndex k) const {
+  DescriptorList out;
+  for (FeatureId f = keyframe_offsets_[k]; f < keyframe_offsets_[k + 1]; ++f) out.push_back(descriptor(f));
+  return out;
+}
+
+QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_limit, SearchMode mode) const {
+  return query(descriptorsFromMat(q), candidate_limit, mode);
+}
+
+QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candidate_limit, SearchMode mode) const {
+  const KeyframeIndex n = static_cast<KeyframeIndex>(std::min<size_t>(candidate_limit, size()));
+  QueryResult result;
+  result.similarity.assign(n, 0.0);
+  QueryStats& stats = result.stats;
+  stats.query_features = q.size();
+  if (n == 0 || q.empty()) return result;
+
+  const SimilarityParams& sp = params_.similarity;
+  const FeatureId id_limit = keyframe_offsets_[n];
+  const int d0 = sp.max_distance;
+  const int tp = sp.early_termination_threshold;
+  VoteAccumulator accumulator(sp, n, result.similarity);
+  std::vector<Vote> votes;
+
+  std::vector<FeatureId> candidates;
+  struct Survivor {
+    FeatureId id;
+    int partial;
+  };
+  std::vector<Survivor> survivors;
+  for (const Descriptor& f : q) {
+    votes.clear();
+    if (mode == SearchMode::kExact) {
+      stats.full_distances += id_limit;
+      for (FeatureId id = 0; id < id_limit; ++id) {
+        const int d = fullDistance(f, id);
+        if (d <= d0) votes.push_back({id, 0, phi_(d)});
+      }
+    } else {
+      ProbeCounters counters;
+      candidates.clear();
+      index_.gather(f, id_limit, counters, candidates);
+      // Candidates are scattered over the whole database, so each check waits for memory. Two
+      // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
+      // requested while one is checked, then the rest of the survivors likewise.
+      constexpr size_t kAhead = 16;
+      const size_t n_candidates = candidates.size();
+      survivors.clear();
+      for (size_t c = 0; c < n_candidates; ++c) {
+        if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
+        const FeatureId id = candidates[c];
+        const int partial = popcount64(f.words[0] ^ heads_[id]);
+        if (partial > tp) continue;
+        survivors.push_back({id, partial});
+      }
+      stats.early_rejections += n_candidates - survivors.size();
+      stats.full_distances += survivors.size();
+      for (size_t c = 0; c < survivors.size(); ++c) {
+        if (c + kAhead < survivors.size()) __builtin_prefetch(&tails_[survivors[c + kAhead].id]);
+        const auto [id, partial] = survivors[c];
+        const Tail& tail = tails_[id];
+        const int d = partial + popcount64(f.words[1] ^ tail[0]) + popcount64(f.words[2] ^ tail[1]) +
+                      popcount64(f.words[3] ^ tail[2]);
+        if (d <= d0) votes.push_back({id, 0, phi_(d)});
+      }
+      removeDuplicateVotes(votes);
+      stats.buckets_probed += counters.buckets_probed;
+      stats.candidates_visited += counters.entries_visited;
+    }
+    // Only votes need their keyframe, and they are few: look it up rather than store it per feature.
+    for (Vote& v : votes) v.keyframe = keyframeOf(v.feature);
+    stats.votes += votes.size();
+    accumulator.addFeatureVotes(votes);
+  }
+
+  if (sp.normalize_by_feature_counts) {
+    for (KeyframeIndex k = 0; k < n; ++k) {
+      const size_t nk = featureCount(k);
+      if (nk > 0) result.similarity[k] /= static_cast<double>(q.size()) * static_cast<double>(nk);
+    }
+  }
+  return result;
+}
+
+QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit,
+                                             SearchMode mode) {
+  QueryResult result = query(descriptors, candidate_limit, mode);
+  insert(descriptors);
+  return result;
+}
+
+size_t KeyframeDatabase::memoryBytes() const {
+  return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(Tail) +
+         keyframe_offsets_.capacity() * sizeof(FeatureId);
+}
+
+}  // namespace mild
