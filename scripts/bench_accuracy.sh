@@ -1,49 +1,122 @@
 #!/bin/bash
-# Accuracy on the bench sequences (../shared/bench by default), with the default parameters and two
-# variants: without geometric verification, and with exact (brute-force) similarity instead of MIH.
-# Prints a Markdown table; the candidates, stats and logs stay in $OUT.
-#   ./scripts/bench_accuracy.sh [BENCH_DIR] [VARIANTS]
-# VARIANTS, comma-separated: default, unverified, exact (the three by default), boundedN (unverified
-# with index/max_bucket_entries N, e.g. bounded128).
+# Accuracy with the default parameters on the five public bench sequences (../shared/bench) and on
+# generated ones: other seeds of every named kind, and long `scale` walks, rendered by
+# ../shared/bench/generator/gen.py into a cache outside the repository when missing. Prints
+# Markdown tables: per sequence (with the peers of PEERS.md where they were measured), the scorer's
+# leave-one-kind-out cross-validation, and writes the pooled reliability diagram.
+#   ./scripts/bench_accuracy.sh                    # everything (about an hour on two cores)
+#   SETS=public ./scripts/bench_accuracy.sh        # public, train, holdout, scale: comma-separated
+#   CONFIG=my.yaml ./scripts/bench_accuracy.sh     # another configuration
+# Seeds: train = 201, 202 (campus, night, city) and 201 (corridor, aliasing), on which the scorer's
+# weights were fitted together with the public five; holdout = 203, 204 of all five kinds and the
+# scale walks 301, 302 (5,000 frames), never used for fitting or choosing anything.
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
-BENCH="${1:-$REPO/../shared/bench}"
-VARIANTS="${2:-default,unverified,exact}"
+BENCH="${BENCH:-$REPO/../shared/bench}"
+CACHE="${MILD_BENCH_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mild_lcd/bench}"
+SETS="${SETS:-public,train,holdout,scale}"
 OUT="${OUT:-$BUILD_DIR/bench_accuracy}"
+JOBS="${JOBS:-2}"
+mild_install_deps
+"$REPO/scripts/install_deps.sh" "$REPO/scripts/debian-packages-bench.txt"  # the generator's OpenCV and numpy
 mild_configure_and_build --target mild_offline mild_score >/dev/null
 BIN="$BUILD_DIR/devel/lib/mild_lcd"
-mkdir -p "$OUT"
+mkdir -p "$OUT" "$CACHE"
 
-config_of() {
-  case "$1" in
-    default) : >"$OUT/default.yaml" ;;
-    unverified) printf 'verification:\n  enabled: false\n' >"$OUT/unverified.yaml" ;;
-    exact) printf 'verification:\n  enabled: false\nsimilarity:\n  search: exact\n' >"$OUT/exact.yaml" ;;
-    bounded[0-9]*) printf 'verification:\n  enabled: false\nindex:\n  max_bucket_entries: %s\n' "${1#bounded}" >"$OUT/$1.yaml" ;;
-    *) echo "unknown variant $1" >&2; exit 2 ;;
-  esac
-  echo "$OUT/$1.yaml"
+# name -> folder, generating what is missing.
+sequences=()
+add_generated() {  # name, gen.py arguments...
+  local name=$1
+  shift
+  if [[ ! -f "$CACHE/$name/gt_loops.txt" ]]; then
+    echo "[mild_lcd] rendering $name into $CACHE (once)" >&2
+    rm -rf "$CACHE/tmp_$name"
+    (cd "$BENCH/generator" && /usr/bin/python3 gen.py "$@" --out "$CACHE/tmp_$name" >"$CACHE/$name.log" 2>&1)
+    local made
+    made=$(find "$CACHE/tmp_$name" -name gt_loops.txt -printf '%h\n' | head -n 1)
+    mv "$made" "$CACHE/$name"
+    rm -rf "$CACHE/tmp_$name"
+  fi
+  sequences+=("$name=$CACHE/$name")
 }
-
-echo "| sequence | variant | recall@100%P | AP | max F1 | extract ms | query ms | verify ms |"
-echo "|---|---|---|---|---|---|---|---|"
-for seq in "$BENCH"/*/; do
-  seq="${seq%/}"
-  name=$(basename "$seq")
-  [[ -f "$seq/gt_loops.txt" ]] || continue
-  for variant in ${VARIANTS//,/ }; do
-    tag="${name}_${variant}"
-    "$BIN/mild_offline" --images "$seq" --config "$(config_of "$variant")" --output "$OUT/$tag.csv" \
-      --stats "$OUT/$tag.json" >"$OUT/$tag.log" 2>&1
-    score=$("$BIN/mild_score" "$seq/gt_loops.txt" "$OUT/$tag.csv" --json)
-    /usr/bin/python3 - "$name" "$variant" "$score" "$OUT/$tag.json" <<'EOF'
-import json, sys
-name, variant, score, stats = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), json.load(open(sys.argv[4]))
-verify = stats.get("verify_ms", {}).get("mean")
-print(f"| {name} | {variant} | {score['recall_at_100_precision']:.3f} | {score['average_precision']:.3f} | "
-      f"{score['max_f1']:.3f} | {stats['extract_ms']['mean']:.1f} | {stats['query_ms']['mean']:.1f} | "
-      f"{'-' if verify is None else f'{verify:.1f}'} |")
-EOF
-  done
+for set in ${SETS//,/ }; do
+  case "$set" in
+    public) for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do sequences+=("$s=$BENCH/$s"); done ;;
+    train)
+      for k in pub_campus pub_night pub_city; do for seed in 201 202; do add_generated "${k}_s$seed" seq "$k" --seed "$seed"; done; done
+      for k in pub_corridor pub_aliasing; do add_generated "${k}_s201" seq "$k" --seed 201; done ;;
+    holdout)
+      for k in pub_corridor pub_city pub_aliasing pub_campus pub_night; do
+        for seed in 203 204; do add_generated "${k}_s$seed" seq "$k" --seed "$seed"; done
+      done ;;
+    scale) for seed in 301 302; do add_generated "scale5k_s$seed" scale --frames 5000 --seed "$seed"; done ;;
+    *) echo "unknown set $set (public, train, holdout, scale)" >&2; exit 2 ;;
+  esac
 done
+
+config=()
+[[ -n "${CONFIG:-}" ]] && config=(--config "$CONFIG")
+run_one() {  # name=folder
+  local name=${1%%=*} dir=${1#*=}
+  "$BIN/mild_offline" --images "$dir" "${config[@]}" --output "$OUT/$name.csv" --details "$OUT/$name.details.csv" \
+    --stats "$OUT/$name.json" >"$OUT/$name.log" 2>&1 || { echo "[mild_lcd] mild_offline failed on $name (see $OUT/$name.log)" >&2; return 1; }
+}
+export -f run_one
+export BIN OUT
+export CONFIG_ARGS="${config[*]}"
+printf '%s\n' "${sequences[@]}" | xargs -P "$JOBS" -I{} bash -c 'config=($CONFIG_ARGS); run_one "$@"' _ {}
+
+/usr/bin/python3 - "$OUT" "$BENCH" "${sequences[@]}" <<'EOF'
+import json, subprocess, sys
+out, bench, specs = sys.argv[1], sys.argv[2], sys.argv[3:]
+peers = {  # PEERS.md: recall@100%P / AP of the original MILD (loop probability) and iBoW-LCD
+    "pub_corridor": ("0.145 / 0.940", "0.662 / 0.868"), "pub_city": ("0.019 / 0.927", "0.411 / 0.884"),
+    "pub_aliasing": ("0.825 / 0.947", "0.780 / 0.843"), "pub_campus": ("0.277 / 0.787", "0.133 / 0.545"),
+    "pub_night": ("0.615 / 0.867", "0.588 / 0.752")}
+print("| sequence | recall@100%P | AP | max F1 | p >= 0.5: precision | p >= 0.5: recall | query ms | original MILD | iBoW-LCD |")
+print("|---|---|---|---|---|---|---|---|---|")
+for spec in specs:
+    name, folder = spec.split("=", 1)
+    gt = f"{folder}/gt_loops.txt"
+    m = json.loads(subprocess.run([f"{out}/../devel/lib/mild_lcd/mild_score", gt, f"{out}/{name}.csv", "--json"],
+                                  capture_output=True, text=True, check=True).stdout)
+    truth, dc, queries = set(), set(), set()
+    for line in open(gt):
+        p = line.split()
+        if len(p) >= 4 and not p[0].startswith("#"):
+            (truth if p[3] == "1" else dc).add((int(p[0]), int(p[1])))
+            if p[3] == "1":
+                queries.add(int(p[0]))
+    best = {}
+    for line in open(f"{out}/{name}.csv"):
+        p = line.strip().split(",")
+        if p[0] == "query" or int(p[0]) - int(p[1]) < 40:
+            continue
+        i, j, s = int(p[0]), int(p[1]), float(p[2])
+        if i not in best or s > best[i][1]:
+            best[i] = (j, s)
+    right = sum(1 for i, (j, s) in best.items() if s >= 0.5 and (i, j) in truth)
+    wrong = sum(1 for i, (j, s) in best.items() if s >= 0.5 and (i, j) not in truth and (i, j) not in dc)
+    stats = json.load(open(f"{out}/{name}.json"))
+    mild, ibow = peers.get(name, ("-", "-"))
+    print(f"| {name} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | {m['max_f1']:.3f} | "
+          f"{right / max(1, right + wrong):.3f} ({wrong} wrong) | {right / max(1, len(queries)):.3f} | "
+          f"{stats['query_ms']['mean']:.1f} | {mild} | {ibow} |")
+EOF
+
+# The scorer, cross-validated: each kind left out in turn (its generated seeds with it).
+fit_runs=()
+for spec in "${sequences[@]}"; do
+  name=${spec%%=*}
+  case "$name" in pub_*_s20[34]|scale*) continue ;; esac  # hold-out sequences are never fitted on
+  fit_runs+=("$name=${spec#*=}:$OUT/$name.details.csv")
+done
+if [[ ${#fit_runs[@]} -gt 1 ]]; then
+  echo
+  "$REPO/scripts/fit_scoring.py" --cv "${fit_runs[@]}" --json "$OUT/scoring_cv.json"
+fi
+
+# The pooled reliability diagram of every sequence run.
+/usr/bin/python3 "$REPO/scripts/plot_reliability.py" "$OUT/reliability.png" "$OUT" "${sequences[@]}"
+echo "[mild_lcd] candidates, details, stats and reliability.png in $OUT"

@@ -1,5 +1,6 @@
 #!/usr/bin/python3
-"""Plots for mild_offline: precision-recall curve and detections against ground truth.
+"""Plots for mild_offline: precision-recall curve, detections against ground truth, and the
+reliability diagram of the loop probability.
 
 Usage: plot_offline.py PLOT_DATA.json OUTPUT_DIR   (PLOT_DATA.json is written by mild_offline --plots)
 """
@@ -69,6 +70,33 @@ def loops_matrix(data, path):
     plt.close(fig)
 
 
+def reliability(data, path):
+    bins = data.get("reliability", [])
+    fig, ax = plt.subplots(figsize=(5, 4), dpi=120)
+    ax.plot([0, 1], [0, 1], ":", color="grey", lw=1, label="calibrated")
+    used = [b for b in bins if b[2] > 0]
+    if used:
+        mean = [b[3] for b in used]
+        right = [b[4] for b in used]
+        ax.plot(mean, right, "o-", color="tab:blue", lw=1.5, label="best candidate per query")
+        for b in used:
+            ax.annotate(str(int(b[2])), (b[3], b[4]), textcoords="offset points", xytext=(4, -10), fontsize=7)
+    d = data.get("decision", {})
+    ax.axvline(0.5, color="tab:red", lw=0.8, alpha=0.5)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("loop probability (bin mean)")
+    ax.set_ylabel("fraction right")
+    ax.set_title("reliability: ECE %.3f;  at p >= 0.5: precision %.3f, recall %.3f"
+                 % (data.get("expected_calibration_error", 0.0), d.get("precision", 1.0), d.get("recall", 0.0)),
+                 fontsize=8)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
 def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__)
@@ -76,6 +104,7 @@ def main():
         data = json.load(f)
     pr_curve(data, f"{sys.argv[2]}/pr_curve.png")
     loops_matrix(data, f"{sys.argv[2]}/loops_matrix.png")
+    reliability(data, f"{sys.argv[2]}/reliability.png")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 #include "mild_lcd/offline/evaluation.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
@@ -126,6 +127,53 @@ std::string formatScore(double score) {
   char buffer[32];
   std::snprintf(buffer, sizeof(buffer), "%.10g", score);
   return buffer;
+}
+
+Decision decideAt(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, double threshold, int min_gap) {
+  Decision d;
+  d.threshold = threshold;
+  for (const ScoredPair& c : bestPerQuery(candidates, min_gap)) {
+    if (c.score < threshold) continue;
+    const std::pair<int, int> pair(c.query, c.candidate);
+    if (truth.right.count(pair)) {
+      ++d.right;
+    } else if (!truth.dont_care.count(pair)) {
+      ++d.wrong;
+    }
+  }
+  if (d.right + d.wrong > 0) d.precision = static_cast<double>(d.right) / static_cast<double>(d.right + d.wrong);
+  d.recall = truth.loop_queries.empty() ? 0.0 : static_cast<double>(d.right) / static_cast<double>(truth.loop_queries.size());
+  return d;
+}
+
+Reliability reliability(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, int bins, int min_gap) {
+  Reliability r;
+  r.bins.resize(static_cast<size_t>(std::max(1, bins)));
+  for (size_t b = 0; b < r.bins.size(); ++b) {
+    r.bins[b].lower = static_cast<double>(b) / static_cast<double>(r.bins.size());
+    r.bins[b].upper = static_cast<double>(b + 1) / static_cast<double>(r.bins.size());
+  }
+  std::vector<double> right(r.bins.size(), 0.0);
+  for (const ScoredPair& c : bestPerQuery(candidates, min_gap)) {
+    const std::pair<int, int> pair(c.query, c.candidate);
+    const bool is_right = truth.right.count(pair) > 0;
+    if (!is_right && truth.dont_care.count(pair)) continue;
+    const double score = std::clamp(c.score, 0.0, 1.0);
+    const size_t b = std::min(r.bins.size() - 1, static_cast<size_t>(score * static_cast<double>(r.bins.size())));
+    ++r.bins[b].count;
+    r.bins[b].mean_score += score;
+    right[b] += is_right ? 1.0 : 0.0;
+    ++r.scored;
+  }
+  for (size_t b = 0; b < r.bins.size(); ++b) {
+    ReliabilityBin& bin = r.bins[b];
+    if (bin.count == 0) continue;
+    bin.mean_score /= static_cast<double>(bin.count);
+    bin.fraction_right = right[b] / static_cast<double>(bin.count);
+    r.expected_calibration_error += static_cast<double>(bin.count) * std::abs(bin.fraction_right - bin.mean_score);
+  }
+  if (r.scored > 0) r.expected_calibration_error /= static_cast<double>(r.scored);
+  return r;
 }
 
 }  // namespace mild

@@ -185,16 +185,21 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
   msg.query_ms = result.stats.query_ms;
   msg.filter_ms = result.stats.filter_ms;
   msg.verify_ms = result.stats.verify_ms;
+  msg.near_past_keyframes = static_cast<int32_t>(result.stats.near_past_keyframes);
   for (const mild::LoopCandidate& c : result.candidates) {
     mild_lcd::LoopCandidate m;
     m.id = c.id;
     m.stamp = stampOf(c.stamp);
     m.probability = c.probability;
+    m.accepted = c.accepted;
+    m.filter_probability = c.filter_probability;
     m.similarity = c.similarity;
     m.verified = c.verification.verified;
     m.inliers = c.verification.inliers;
     m.matches = c.verification.matches;
     m.inlier_ratio = c.verification.inlier_ratio;
+    m.coverage = c.verification.coverage;
+    m.homography_share = c.verification.homography_share;
     msg.candidates.push_back(m);
   }
   return msg;

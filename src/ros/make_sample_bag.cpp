@@ -8,6 +8,8 @@
 #include <iterator>
 
 #include <CLI/CLI.hpp>
+
+#include "common/tool_main.hpp"
 #include <cv_bridge/cv_bridge.h>
 #include <opencv2/imgcodecs.hpp>
 #include <ros/time.h>
@@ -23,6 +25,7 @@
 
 int main(int argc, char** argv) {
   CLI::App app{"Write an image sequence into a rosbag (raw, compressed and keyframe topics)."};
+  app.name("mild_make_bag");
   std::string images, output, image_topic = "/camera/image", keyframe_topic = "/camera/keyframe", frame_id = "camera";
   double start = 1000.0, fps = 10.0;
   long id_offset = 0;
@@ -34,8 +37,7 @@ int main(int argc, char** argv) {
   app.add_option("--start", start, "time stamp of the first frame, seconds");
   app.add_option("--fps", fps, "frame rate when the sequence has no times.txt");
   app.add_option("--frame-id", frame_id, "header.frame_id");
-  CLI11_PARSE(app, argc, argv);
-  try {
+  return mild::tools::toolMain(app, argc, argv, [&] {
     ros::Time::init();
     const mild::tools::ImageSequence seq = mild::tools::openImageSequence(images, fps);
     const mild::OrbExtractor extractor;
@@ -71,9 +73,6 @@ int main(int argc, char** argv) {
     }
     bag.close();
     std::cout << "wrote " << seq.frames.size() << " frames to " << output << "\n";
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
-  }
-  return 0;
+    return 0;
+  });
 }

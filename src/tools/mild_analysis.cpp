@@ -10,6 +10,8 @@
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+
+#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -237,6 +239,7 @@ int run(const Options& opt) {
 
 int main(int argc, char** argv) {
   CLI::App app{"MIH analysis: P_recall(r, m, d), accuracy R, complexity E, fixed cost E_fixed; advisor; priors."};
+  app.name("mild_analysis");
   Options opt;
   app.add_option("--model", opt.model, "where differing bits fall: paper (balls in bins) or exact (distinct bit positions)")
       ->capture_default_str();
@@ -260,11 +263,5 @@ int main(int argc, char** argv) {
   app.add_option("--pairs", opt.pairs, "with --measure-priors: overlapping and disjoint pairs to use")
       ->check(CLI::PositiveNumber)->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return run(opt);
-  } catch (const mild::InvalidInput& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
-  }
+  return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

@@ -8,6 +8,8 @@
 #include <random>
 
 #include <CLI/CLI.hpp>
+
+#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
@@ -201,6 +203,7 @@ int run(const Options& opt) {
 
 int main(int argc, char** argv) {
   CLI::App app{"Benchmark sparse match against OpenCV's BFMatcher and FLANN LSH on real image pairs."};
+  app.name("mild_bench_match");
   Options opt;
   app.add_option("--images", opt.images, "image sequence (bench layout with gt_loops.txt for loop pairs)")->required();
   app.add_option("--pairs", opt.pairs, "number of image pairs (half loop-closing when ground truth exists)")
@@ -213,11 +216,5 @@ int main(int argc, char** argv) {
   app.add_option("--scale", opt.scale, "resize frames by this factor before extraction (small frames yield few features)")
       ->check(CLI::PositiveNumber);
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return run(opt);
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
-  }
+  return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

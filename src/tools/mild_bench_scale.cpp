@@ -14,6 +14,8 @@
 #include <sstream>
 
 #include <CLI/CLI.hpp>
+
+#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -94,7 +96,9 @@ json measurePersistence(const mild::tools::SyntheticKeyframes& synthetic, size_t
   state.next_id = n;
   for (size_t k = 0; k < n; ++k) {
     state.descriptors.push_back(synthetic.keyframe(k));
-    mild::KeyframeRecord record{k, 0.1 * static_cast<double>(k), {}};
+    mild::KeyframeRecord record;
+    record.id = k;
+    record.stamp = 0.1 * static_cast<double>(k);
     for (size_t i = 0; i < state.descriptors.back().size(); ++i) {
       record.keypoints.emplace_back(static_cast<float>(i % 320), static_cast<float>(i / 320), 31.0f, 90.0f, 1e-3f, 0);
     }
@@ -103,7 +107,7 @@ json measurePersistence(const mild::tools::SyntheticKeyframes& synthetic, size_t
   mild::DetectorParams params;
   params.verification.enabled = false;
   mild::LoopDetector detector(params);
-  detector.restore(std::move(state), true);
+  detector.restore(std::move(state), false);
   const fs::path file = fs::temp_directory_path() / ("mild_bench_scale_" + std::to_string(::getpid()) + ".mild");
   auto t = Clock::now();
   mild::saveDetector(detector, file.string());
@@ -279,6 +283,7 @@ int run(const Options& opt) {
 
 int main(int argc, char** argv) {
   CLI::App app{"Query cost of the keyframe database at scale, against the 2017 MILD design and brute force."};
+  app.name("mild_bench_scale");
   Options opt;
   app.add_option("--sizes", opt.sizes, "keyframe counts, comma-separated")->capture_default_str();
   app.add_option("--images", opt.images, "sequences of real frames to replicate (default: ../shared/bench, else the sample)");
@@ -292,11 +297,5 @@ int main(int argc, char** argv) {
   app.add_option("--persistence-keyframes", opt.persistence_keyframes,
                  "time saving and loading a database of this many keyframes (0: skip)")->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return run(opt);
-  } catch (const mild::InvalidInput& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
-  }
+  return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

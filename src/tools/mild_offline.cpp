@@ -9,6 +9,8 @@
 #include <optional>
 
 #include <CLI/CLI.hpp>
+
+#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -78,7 +80,8 @@ int run(const Options& opt) {
   if (!opt.details.empty()) {
     details.open(opt.details);
     if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
-    details << "query,candidate,probability,similarity,matches,inliers,inlier_ratio,verified\n";
+    details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
+               "homography_share,verified,accepted,near_past\n";
   }
 
   mild::LoopDetector detector(params);
@@ -109,8 +112,10 @@ int run(const Options& opt) {
       }
       if (details.is_open()) {
         const mild::Verification& v = c.verification;
-        details << i << "," << c.id << "," << mild::formatScore(c.probability) << "," << c.similarity << "," << v.matches
-                << "," << v.inliers << "," << v.inlier_ratio << "," << (v.verified ? 1 : 0) << "\n";
+        details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
+                << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
+                << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
+                << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "\n";
       }
     }
     if (!similarity_matrix.empty()) {
@@ -159,6 +164,9 @@ int run(const Options& opt) {
                 m.average_precision, m.max_f1);
     std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
                 m.scored_queries, m.true_positives, m.false_positives);
+    const mild::Decision half = mild::decideAt(*truth, mild::loadCandidates(opt.output), 0.5, opt.min_gap);
+    std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision, half.recall,
+                half.right, half.wrong);
     if (!opt.plots.empty()) {
       mild::tools::writeOfflinePlots(opt.plots, *truth, mild::loadCandidates(opt.output), m, n, opt.min_gap);
     }
@@ -172,6 +180,7 @@ int run(const Options& opt) {
 
 int main(int argc, char** argv) {
   CLI::App app{"Run mild_lcd loop-closure detection over an image sequence (offline runner and evaluator)."};
+  app.name("mild_offline");
   Options opt;
   app.add_option("--images", opt.images, "folder of frames in file-name order, or a folder with an images/ subfolder")
       ->required();
@@ -187,14 +196,5 @@ int main(int argc, char** argv) {
   app.add_option("--min-gap", opt.min_gap, "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--print-config", opt.print_config, "print the effective parameters");
-  CLI11_PARSE(app, argc, argv);
-  try {
-    return run(opt);
-  } catch (const mild::InvalidInput& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 3;
-  }
+  return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

@@ -5,6 +5,8 @@
 #include <iostream>
 
 #include <CLI/CLI.hpp>
+
+#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 
 #include "mild_lcd/common/errors.hpp"
@@ -12,6 +14,7 @@
 
 int main(int argc, char** argv) {
   CLI::App app{"Score loop-closure candidates against ground truth (recall@100%P, AP, max F1)."};
+  app.name("mild_score");
   std::string gt, candidates;
   int min_gap = 40;
   bool json = false;
@@ -19,8 +22,7 @@ int main(int argc, char** argv) {
   app.add_option("candidates", candidates, "CSV rows query,candidate,score")->required();
   app.add_option("--min-gap", min_gap, "pairs closer than this many frames are ignored")->check(CLI::NonNegativeNumber);
   app.add_flag("--json", json, "print one JSON object");
-  CLI11_PARSE(app, argc, argv);
-  try {
+  return mild::tools::toolMain(app, argc, argv, [&] {
     const mild::Metrics m = mild::evaluate(mild::loadGroundTruth(gt), mild::loadCandidates(candidates), min_gap);
     if (json) {
       std::cout << nlohmann::json{{"loop_queries", m.loop_queries},
@@ -38,9 +40,6 @@ int main(int argc, char** argv) {
       std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
                   m.scored_queries, m.true_positives, m.false_positives);
     }
-  } catch (const mild::InvalidInput& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 2;
-  }
-  return 0;
+    return 0;
+  });
 }

@@ -305,3 +305,65 @@ TEST(KeyframeDatabase, ClearEmptiesEverything) {
 
 }  // namespace
 }  // namespace mild
+
+namespace mild {
+namespace {
+
+// 300 keyframes of their own random features; `shared` of them (first .. first+count) also hold a
+// noisy copy of part of the query's features, as keyframes that see the query's place do.
+struct SharedView {
+  KeyframeDatabase db;
+  DescriptorList query;
+};
+SharedView sharedView(KeyframeIndex first, KeyframeIndex count) {
+  std::mt19937_64 rng(42);
+  SharedView v;
+  v.query = test::randomDescriptors(200, rng);
+  for (KeyframeIndex k = 0; k < 300; ++k) {
+    DescriptorList features = test::randomDescriptors(200, rng);
+    if (k >= first && k < first + count) {
+      for (size_t i = 0; i < 80; ++i) features[i] = test::flipRandomBits(v.query[(i + k) % v.query.size()], 6, rng);
+    }
+    v.db.insert(features);
+  }
+  return v;
+}
+
+TEST(NearPast, KeyframesStillSharingTheViewUpToTheLimitAreLeftOut) {
+  // Keyframes 255..299 see the query's place: the limit (the fixed exclusion) is 280, so 255..279
+  // are the near past, contiguous with the present.
+  SharedView v = sharedView(255, 45);
+  NearPastRule rule;
+  const QueryResult r = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
+  EXPECT_EQ(r.near_past, 25u) << "the band reaches back to where the shared view began";
+  EXPECT_EQ(r.similarity.size(), 255u);
+  const QueryResult without = v.db.query(v.query, 280);
+  EXPECT_EQ(without.near_past, 0u);
+  EXPECT_EQ(std::max_element(without.similarity.begin(), without.similarity.end()) - without.similarity.begin() >= 255, true)
+      << "without the rule, the near past is the best match";
+}
+
+TEST(NearPast, ARevisitSeparatedFromThePresentStaysACandidate) {
+  // The same view at keyframes 100..124, far from the limit: a revisit, not the near past.
+  SharedView v = sharedView(100, 25);
+  NearPastRule rule;
+  const QueryResult r = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
+  EXPECT_EQ(r.near_past, 0u);
+  ASSERT_EQ(r.similarity.size(), 280u);
+  const auto best = std::max_element(r.similarity.begin(), r.similarity.end()) - r.similarity.begin();
+  EXPECT_GE(best, 100);
+  EXPECT_LT(best, 125);
+}
+
+TEST(NearPast, NeverReachesIntoAnEarlierSessionAndNeedsABackground) {
+  SharedView v = sharedView(200, 100);  // everything from 200 on shares the view
+  NearPastRule rule;
+  rule.floor = 240;  // keyframes below 240 come from an earlier session
+  const QueryResult r = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
+  EXPECT_EQ(r.near_past, 40u) << "the whole current session is the present (its 40 are above min_background)";
+  rule.floor = 270;  // 10 keyframes of this session eligible: fewer than min_background (30)
+  EXPECT_EQ(v.db.query(v.query, 280, SearchMode::kIndex, &rule).near_past, 10u);
+}
+
+}  // namespace
+}  // namespace mild

@@ -85,8 +85,10 @@ TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {
     }
   }
   std::ofstream(path("notes.txt")) << "ignored";
+  // Twelve frames are too few for the near-past band's background: without it, candidates show the numbering.
+  std::ofstream(path("config.yaml")) << "detector:\n  exclusion_frames: 8\n  near_past: false\n";
   const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv") +
-                              " --config " + kFixtureConfig);
+                              " --config " + path("config.yaml"));
   ASSERT_EQ(run.status, 0) << run.output;
   EXPECT_NE(run.output.find("frame 5"), std::string::npos) << run.output;
   EXPECT_NE(run.output.find("000005.jpg"), std::string::npos) << run.output;

@@ -13,7 +13,8 @@
 #include "mild_lcd/features/feature_extractor.hpp"
 #include "mild_lcd/verification/geometric_verifier.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
-#include "mild_lcd/filter/loop_filter.hpp"
+#include "mild_lcd/detector/candidate_scorer.hpp"
+#include "mild_lcd/filter/temporal_filter.hpp"
 
 namespace mild {
 
@@ -22,6 +23,12 @@ struct CandidateParams {
   // > 0) are never candidates, and take no part in the similarity (they would dominate it).
   int exclusion_frames = 40;
   double exclusion_seconds = 0.0;
+  // Beyond it, the near-past band (NearPastRule in keyframe_database.hpp): the newest keyframes
+  // that still share the query's view are excluded too, however many they are.
+  bool near_past = true;
+  double near_past_kappa = 2.0;
+  int near_past_tolerance = 2;
+  int near_past_min_background = 30;
   // At most this many candidates per keyframe, each a local maximum of the loop probability over
   // +- suppression_radius keyframes, with probability >= min_probability.
   int max_candidates = 3;
@@ -37,6 +44,7 @@ struct DetectorParams {
   FilterParams filter;
   CandidateParams candidates;
   VerificationParams verification;
+  ScoringParams scoring;
   SearchMode search = SearchMode::kIndex;
 
   void validate() const;
@@ -46,9 +54,11 @@ struct LoopCandidate {
   uint64_t id = 0;            // the candidate keyframe's id
   KeyframeIndex index = 0;    // its position in the database
   double stamp = 0.0;
-  double probability = 0.0;   // posterior loop probability from the filter
-  double similarity = 0.0;    // Phi' of the query against this keyframe
-  Verification verification;  // geometric check (verified=false, inliers=0 when verification is off)
+  double probability = 0.0;         // calibrated loop probability (CandidateScorer)
+  double filter_probability = 0.0;  // the temporal filter's probability, one of its inputs
+  double similarity = 0.0;          // Phi' of the query against this keyframe
+  bool accepted = false;            // verified and probability >= scoring/decision_probability
+  Verification verification;        // geometric check (verified=false, inliers=0 when verification is off)
 };
 
 struct StepStats {
@@ -58,6 +68,7 @@ struct StepStats {
   double verify_ms = 0.0;
   size_t features = 0;
   size_t eligible_keyframes = 0;
+  size_t near_past_keyframes = 0;  // removed from the eligible ones by the near-past band
   QueryStats query;
 };
 
@@ -73,6 +84,7 @@ struct DetectionResult {
 struct KeyframeRecord {
   uint64_t id = 0;
   double stamp = 0.0;
+  uint32_t session = 0;
   std::vector<cv::KeyPoint> keypoints;
 };
 
@@ -83,14 +95,14 @@ struct DetectorState {
   KeyframeIndex session_start = 0;
   std::vector<KeyframeRecord> records;     // in database order
   std::vector<DescriptorList> descriptors; // one list per record, one descriptor per keypoint
-  std::vector<double> posterior;           // the filter's state
-  double no_loop = 1.0;
+  std::string filter_name;                 // TemporalFilter::name() of the filter that saved it
+  std::vector<uint8_t> filter_state;       // its saveState()
 };
 
 // A state checked and turned into a ready database and filter, waiting to replace a detector's.
 struct PreparedRestore {
   KeyframeDatabase database;
-  LoopFilter filter;
+  std::unique_ptr<TemporalFilter> filter;
   std::vector<KeyframeRecord> records;
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
   uint64_t next_id = 0;
@@ -124,9 +136,10 @@ class LoopDetector {
 
   // Replaces everything the detector has learnt by `state` (the index is rebuilt from the
   // descriptors with this detector's parameters). continue_session = true resumes exactly where the
-  // saved run stopped: the same outputs as if it had never stopped. false starts a new session on
-  // the stored map (e.g. yesterday's): the loaded keyframes are exempt from the temporal exclusion,
-  // since they were not seen a moment ago, and the filter starts from "no loop".
+  // saved run stopped: the same outputs as if it had never stopped (it needs the state of a filter
+  // of this detector's filter/type). false starts a new session on the stored map (e.g.
+  // yesterday's): the loaded keyframes are exempt from the temporal exclusion, since they were not
+  // seen a moment ago, and the filter starts from "no loop".
   // Throws InvalidInput, changing nothing, when the state is inconsistent.
   void restore(DetectorState state, bool continue_session);
   // restore() in two steps: prepareRestore reads only the detector's parameters (fixed at
@@ -138,7 +151,7 @@ class LoopDetector {
 
   size_t size() const { return records_.size(); }
   const KeyframeDatabase& database() const { return database_; }
-  const LoopFilter& filter() const { return filter_; }
+  const TemporalFilter& filter() const { return *filter_; }
   const KeyframeRecord& record(KeyframeIndex k) const { return records_[k]; }
   std::optional<KeyframeIndex> find(uint64_t id) const;
   Features features(KeyframeIndex k) const;
@@ -156,7 +169,8 @@ class LoopDetector {
   DetectorParams params_;
   OrbExtractor extractor_;
   KeyframeDatabase database_;
-  LoopFilter filter_;
+  std::unique_ptr<TemporalFilter> filter_;
+  CandidateScorer scorer_;
   std::unique_ptr<CandidateVerifier> verifier_;
   std::vector<KeyframeRecord> records_;
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;

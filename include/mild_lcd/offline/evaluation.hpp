@@ -60,6 +60,33 @@ std::vector<ScoredPair> bestPerQuery(const std::vector<ScoredPair>& candidates, 
 
 Metrics evaluate(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, int min_gap = 40);
 
+// The hard decision "act on candidates scoring at least `threshold`", over each query's best
+// candidate: right and wrong ones (don't-care skipped), precision, and recall over the loop queries.
+struct Decision {
+  double threshold = 0.5;
+  size_t right = 0;
+  size_t wrong = 0;
+  double precision = 1.0;  // 1 when nothing is accepted
+  double recall = 0.0;
+};
+Decision decideAt(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, double threshold, int min_gap = 40);
+
+// Reliability of the scores as probabilities, over each query's best candidate (don't-care
+// skipped): `bins` equal-width bins of the score in [0, 1], each with its count, mean score and
+// fraction right; the expected calibration error is the count-weighted mean |fraction - mean score|.
+struct ReliabilityBin {
+  double lower = 0.0, upper = 0.0;
+  size_t count = 0;
+  double mean_score = 0.0;
+  double fraction_right = 0.0;
+};
+struct Reliability {
+  std::vector<ReliabilityBin> bins;
+  double expected_calibration_error = 0.0;
+  size_t scored = 0;
+};
+Reliability reliability(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, int bins = 10, int min_gap = 40);
+
 // Scores as written to CSV: enough digits that ranking and ties survive the round trip.
 std::string formatScore(double score);
 

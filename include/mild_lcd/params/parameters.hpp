@@ -26,7 +26,7 @@ class ParameterSource {
 };
 
 // Calls visit(name, field) for every tunable of DetectorParams, fields being int, double, bool,
-// uint32_t, uint64_t, SearchMode or std::vector<double>. This list is the single definition of the parameter names.
+// uint32_t, uint64_t, std::string, SearchMode or std::vector<double>. This list is the single definition of the parameter names.
 template <class Visit>
 void visitParameters(DetectorParams& p, Visit&& visit);
 
@@ -96,6 +96,7 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
   visit("similarity/early_termination_threshold", p.database.similarity.early_termination_threshold);
   visit("similarity/search", p.search);
 
+  visit("filter/type", p.filter.type);
   visit("filter/loop_persistence", p.filter.loop_persistence);
   visit("filter/loop_onset", p.filter.loop_onset);
   visit("filter/motion_kernel", p.filter.motion_kernel);
@@ -104,6 +105,10 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
 
   visit("detector/exclusion_frames", p.candidates.exclusion_frames);
   visit("detector/exclusion_seconds", p.candidates.exclusion_seconds);
+  visit("detector/near_past", p.candidates.near_past);
+  visit("detector/near_past_kappa", p.candidates.near_past_kappa);
+  visit("detector/near_past_tolerance", p.candidates.near_past_tolerance);
+  visit("detector/near_past_min_background", p.candidates.near_past_min_background);
   visit("detector/max_candidates", p.candidates.max_candidates);
   visit("detector/suppression_radius", p.candidates.suppression_radius);
   visit("detector/min_probability", p.candidates.min_probability);
@@ -122,6 +127,11 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
   visit("verification/fy", p.verification.fy);
   visit("verification/cx", p.verification.cx);
   visit("verification/cy", p.verification.cy);
+
+  visit("scoring/enabled", p.scoring.enabled);
+  visit("scoring/weights", p.scoring.weights);
+  visit("scoring/bias", p.scoring.bias);
+  visit("scoring/decision_probability", p.scoring.decision_probability);
 }
 
 }  // namespace mild

@@ -32,8 +32,29 @@ struct QueryStats {
   QueryStats& operator+=(const QueryStats& o);
 };
 
+// "The place I am still leaving": the newest keyframes before the candidate limit may still show
+// what the query shows (far buildings in view while walking towards them), and would come out as a
+// loop with the near past. The band is measured on the query itself: walking back from the newest
+// eligible keyframe, it extends while the number of query features that have a match in the
+// keyframe stays above the background level of the older keyframes,
+//   median + kappa * 1.4826 MAD  of that count over the newest `background` eligible keyframes,
+// allowing `tolerance` keyframes below it in a row. Keyframes in the band take no part in the query
+// (neither votes nor N, N_f). A revisit is separated from the present by keyframes that look like
+// neither: the band stops there. The band never reaches below `floor` (the start of the current
+// session: older sessions are never "a moment ago", though they count as background); with fewer
+// than `min_background` keyframes eligible, every one of the session is in the band (there is no
+// background to tell the present from).
+struct NearPastRule {
+  double kappa = 2.0;
+  int tolerance = 2;
+  int min_background = 30;
+  int background = 400;
+  KeyframeIndex floor = 0;
+};
+
 struct QueryResult {
   std::vector<double> similarity;  // Phi'(query, k) for every keyframe k below the candidate limit
+  KeyframeIndex near_past = 0;     // keyframes the NearPastRule removed from the candidate limit
   QueryStats stats;
 };
 
@@ -70,15 +91,17 @@ class KeyframeDatabase {
 
   // Similarity of the query to every keyframe k < candidate_limit (all keyframes by default).
   // Keyframes at or beyond the limit take no part: they neither receive votes nor count in N or N_f.
+  // With a NearPastRule, the limit is lowered by the near-past band first (the similarity vector is
+  // then shorter by near_past).
   QueryResult query(const DescriptorList& query, KeyframeIndex candidate_limit = kAllKeyframes,
-                    SearchMode mode = SearchMode::kIndex) const;
+                    SearchMode mode = SearchMode::kIndex, const NearPastRule* near_past = nullptr) const;
   QueryResult query(const cv::Mat& query, KeyframeIndex candidate_limit = kAllKeyframes,
                     SearchMode mode = SearchMode::kIndex) const;
 
   // query() against the keyframes stored so far, then insert(). The new keyframe's index is size()-1
   // afterwards.
   QueryResult insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit = kAllKeyframes,
-                             SearchMode mode = SearchMode::kIndex);
+                             SearchMode mode = SearchMode::kIndex, const NearPastRule* near_past = nullptr);
 
   size_t size() const { return keyframe_offsets_.size() - 1; }
   size_t featureCount() const { return heads_.size(); }

@@ -23,6 +23,11 @@ void CandidateParams::validate() const {
   if (!(exclusion_seconds >= 0.0)) throw InvalidInput("detector/exclusion_seconds must be >= 0");
   if (max_candidates < 1) throw InvalidInput("detector/max_candidates must be >= 1, got " + std::to_string(max_candidates));
   if (suppression_radius < 0) throw InvalidInput("detector/suppression_radius must be >= 0");
+  if (!(near_past_kappa >= 0.0) || !std::isfinite(near_past_kappa)) {
+    throw InvalidInput("detector/near_past_kappa must be >= 0, got " + std::to_string(near_past_kappa));
+  }
+  if (near_past_tolerance < 0) throw InvalidInput("detector/near_past_tolerance must be >= 0");
+  if (near_past_min_background < 1) throw InvalidInput("detector/near_past_min_background must be >= 1");
   if (!(min_probability >= 0.0 && min_probability <= 1.0)) {
     throw InvalidInput("detector/min_probability must be in [0, 1], got " + std::to_string(min_probability));
   }
@@ -34,13 +39,15 @@ void DetectorParams::validate() const {
   filter.validate();
   candidates.validate();
   if (verification.enabled) verification.validate();
+  scoring.validate();
 }
 
 LoopDetector::LoopDetector(const DetectorParams& params)
     : params_((params.validate(), params)),
       extractor_(params.orb),
       database_(params.database),
-      filter_(params.filter) {
+      filter_(makeTemporalFilter(params.filter)),
+      scorer_(params.scoring) {
   if (params_.verification.enabled) verifier_ = std::make_unique<GeometricVerifier>(params_.verification);
 }
 
@@ -48,7 +55,7 @@ LoopDetector::~LoopDetector() = default;
 
 void LoopDetector::reset() {
   database_.clear();
-  filter_.reset();
+  filter_->reset();
   records_.clear();
   index_of_id_.clear();
   next_id_ = 0;
@@ -83,10 +90,15 @@ PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_
 
   KeyframeDatabase database(params_.database);
   database.insertAll(state.descriptors);
-  LoopFilter filter(params_.filter);
+  std::unique_ptr<TemporalFilter> filter = makeTemporalFilter(params_.filter);
   if (continue_session) {
-    if (state.posterior.size() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
-    filter.setState(std::move(state.posterior), state.no_loop);
+    if (state.filter_name != filter->name()) {
+      throw InvalidInput("the saved run used filter/type '" + state.filter_name + "', this detector runs '" +
+                         filter->name() + "': load it as a new session (continue_session false), or run '" +
+                         state.filter_name + "' to resume it");
+    }
+    filter->loadState(state.filter_state);
+    if (filter->stateKeyframes() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
   }
   return PreparedRestore{std::move(database), std::move(filter), std::move(state.records), std::move(index_of_id),
                          state.next_id,
@@ -170,18 +182,26 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
 
   auto start = Clock::now();
   const KeyframeIndex eligible = eligibleCount(stamp);
-  QueryResult query = database_.insertAndQuery(features.descriptors, eligible, params_.search);
+  NearPastRule near_past;
+  const CandidateParams& cp = params_.candidates;
+  near_past.kappa = cp.near_past_kappa;
+  near_past.tolerance = cp.near_past_tolerance;
+  near_past.min_background = cp.near_past_min_background;
+  near_past.floor = session_start_;
+  QueryResult query =
+      database_.insertAndQuery(features.descriptors, eligible, params_.search, cp.near_past ? &near_past : nullptr);
   result.stats.query_ms = msSince(start);
   result.stats.query = query.stats;
-  result.stats.eligible_keyframes = eligible;
+  result.stats.eligible_keyframes = query.similarity.size();
+  result.stats.near_past_keyframes = query.near_past;
 
   result.query_index = static_cast<KeyframeIndex>(records_.size());
-  records_.push_back(KeyframeRecord{result.query_id, stamp, std::move(features.keypoints)});
+  records_.push_back(KeyframeRecord{result.query_id, stamp, 0, std::move(features.keypoints)});
   index_of_id_.emplace(result.query_id, result.query_index);
   next_id_ = std::max(next_id_, result.query_id + 1);
 
   start = Clock::now();
-  const std::vector<double>& belief = filter_.update(query.similarity);
+  const std::vector<double>& belief = filter_->update(query.similarity);
   result.candidates = selectCandidates(belief, query.similarity);
   result.stats.filter_ms = msSince(start);
 
@@ -191,6 +211,17 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
     for (LoopCandidate& c : result.candidates) c.verification = verifier_->verify(query_features, this->features(c.index));
     result.stats.verify_ms = msSince(start);
   }
+  for (LoopCandidate& c : result.candidates) {
+    c.probability = verifier_ ? scorer_.probability(c.filter_probability, c.verification) : c.filter_probability;
+    c.accepted = c.verification.verified && c.probability >= params_.scoring.decision_probability;
+  }
+  // Best first by the published probability (the filter's order among equals), at least
+  // detector/min_probability.
+  std::stable_sort(result.candidates.begin(), result.candidates.end(),
+                   [](const LoopCandidate& a, const LoopCandidate& b) { return a.probability > b.probability; });
+  result.candidates.erase(std::remove_if(result.candidates.begin(), result.candidates.end(),
+                                         [&](const LoopCandidate& c) { return c.probability < cp.min_probability; }),
+                          result.candidates.end());
   result.similarity = std::move(query.similarity);
   return result;
 }
@@ -205,7 +236,7 @@ std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<doub
   });
   std::vector<LoopCandidate> out;
   for (KeyframeIndex j : order) {
-    if (out.size() >= static_cast<size_t>(p.max_candidates) || belief[j] < p.min_probability || belief[j] <= 0.0) break;
+    if (out.size() >= static_cast<size_t>(p.max_candidates) || belief[j] <= 0.0) break;
     const bool suppressed = std::any_of(out.begin(), out.end(), [&](const LoopCandidate& c) {
       return (c.index > j ? c.index - j : j - c.index) <= static_cast<KeyframeIndex>(p.suppression_radius);
     });
@@ -214,6 +245,7 @@ std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<doub
     c.index = j;
     c.id = records_[j].id;
     c.stamp = records_[j].stamp;
+    c.filter_probability = belief[j];
     c.probability = belief[j];
     c.similarity = similarity[j];
     out.push_back(c);

@@ -94,6 +94,7 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
   for (const auto& [name, value] : describeParameters(detector.params())) parameters += name + ": " + value + "\n";
   w.put(static_cast<uint32_t>(parameters.size()));
   w.putBytes(parameters.data(), parameters.size());
+  w.put(static_cast<uint32_t>(kDescriptorBits));
   w.put(detector.nextId());
   w.put(static_cast<uint32_t>(detector.sessionStart()));
   w.put(static_cast<uint32_t>(detector.size()));
@@ -101,6 +102,7 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
     const KeyframeRecord& r = detector.record(k);
     w.put(r.id);
     w.put(r.stamp);
+    w.put(r.session);
     w.put(static_cast<uint32_t>(r.keypoints.size()));
     for (const cv::KeyPoint& p : r.keypoints) {
       w.put(p.pt.x);
@@ -113,10 +115,12 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
     const DescriptorList descriptors = detector.database().descriptors(k);
     w.putBytes(descriptors.data(), descriptors.size() * sizeof(Descriptor));
   }
-  const std::vector<double>& posterior = detector.filter().posterior();
-  w.put(static_cast<uint32_t>(posterior.size()));
-  w.putBytes(posterior.data(), posterior.size() * sizeof(double));
-  w.put(detector.filter().noLoopProbability());
+  const std::string filter = detector.filter().name();
+  w.put(static_cast<uint32_t>(filter.size()));
+  w.putBytes(filter.data(), filter.size());
+  const std::vector<uint8_t> filter_state = detector.filter().saveState();
+  w.put(static_cast<uint64_t>(filter_state.size()));
+  w.putBytes(filter_state.data(), filter_state.size());
   w.flush();
 }
 
@@ -306,8 +310,8 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   (void)header_crc;
   (void)payload_crc;
 #endif
-  if (version != kDatabaseFormatVersion) {
-    throw InvalidInput(origin + ": database format version " + std::to_string(version) + "; this mild_lcd reads version " +
+  if (version != kDatabaseFormatVersion && version != 1) {
+    throw InvalidInput(origin + ": database format version " + std::to_string(version) + "; this mild_lcd reads versions 1 to " +
                        std::to_string(kDatabaseFormatVersion));
   }
   if (flags != 0) throw InvalidInput(origin + ": unknown format flags " + std::to_string(flags));
@@ -327,15 +331,23 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   const size_t text = in.count(1, "the parameters");
   const uint8_t* chars = in.take(text, "the parameters");
   state.parameters.assign(reinterpret_cast<const char*>(chars), text);
+  if (version >= 2) {
+    const uint32_t bits = in.get<uint32_t>("the descriptor width");
+    if (bits != static_cast<uint32_t>(kDescriptorBits)) {
+      throw InvalidInput(origin + ": holds " + std::to_string(bits) + "-bit descriptors; this database holds " +
+                         std::to_string(kDescriptorBits) + "-bit ones");
+    }
+  }
   state.next_id = in.get<uint64_t>("the next id");
   state.session_start = in.get<uint32_t>("the session start");
-  const size_t keyframes = in.count(8 + 8 + 4, "the keyframe count");
+  const size_t keyframes = in.count(8 + 8 + 4 + (version >= 2 ? 4 : 0), "the keyframe count");
   state.records.resize(keyframes);
   state.descriptors.resize(keyframes);
   for (size_t k = 0; k < keyframes; ++k) {
     KeyframeRecord& r = state.records[k];
     r.id = in.get<uint64_t>("a keyframe id");
     r.stamp = in.get<double>("a keyframe stamp");
+    if (version >= 2) r.session = in.get<uint32_t>("a keyframe session");
     const size_t features = in.count(kKeypointBytes + kDescriptorBytes, "a keyframe's feature count");
     r.keypoints.resize(features);
     for (cv::KeyPoint& p : r.keypoints) {
@@ -350,11 +362,25 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
     const uint8_t* descriptors = in.take(features * kDescriptorBytes, "descriptors");
     if (features > 0) std::memcpy(state.descriptors[k].data(), descriptors, features * kDescriptorBytes);
   }
-  const size_t posterior = in.count(sizeof(double), "the filter state size");
-  state.posterior.resize(posterior);
-  const uint8_t* beliefs = in.take(posterior * sizeof(double), "the filter state");
-  if (posterior > 0) std::memcpy(state.posterior.data(), beliefs, posterior * sizeof(double));  // no null pointers to memcpy
-  state.no_loop = in.get<double>("the filter state");
+  if (version == 1) {
+    // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, which is
+    // that filter's state layout: u32 count, count doubles, one double.
+    const size_t posterior = in.count(sizeof(double), "the filter state size");
+    const uint8_t* beliefs = in.take(posterior * sizeof(double) + sizeof(double), "the filter state");
+    const uint32_t count = static_cast<uint32_t>(posterior);
+    state.filter_name = "exclusive_hypotheses";
+    state.filter_state.resize(sizeof(count));
+    std::memcpy(state.filter_state.data(), &count, sizeof(count));
+    state.filter_state.insert(state.filter_state.end(), beliefs, beliefs + posterior * sizeof(double) + sizeof(double));
+  } else {
+    const size_t name = in.count(1, "the filter name");
+    const uint8_t* name_chars = in.take(name, "the filter name");
+    state.filter_name.assign(reinterpret_cast<const char*>(name_chars), name);
+    const uint64_t bytes = in.get<uint64_t>("the filter state size");
+    if (bytes > in.remaining()) throw InvalidInput(origin + ": corrupt: the filter state runs past the end");
+    const uint8_t* filter_state = in.take(static_cast<size_t>(bytes), "the filter state");
+    state.filter_state.assign(filter_state, filter_state + bytes);
+  }
   if (in.remaining() != 0) throw InvalidInput(origin + ": corrupt: " + std::to_string(in.remaining()) + " stray bytes");
   return state;
 }

@@ -26,6 +26,8 @@ std::string toText(const T& v) {
     return v ? "true" : "false";
   } else if constexpr (std::is_same_v<T, SearchMode>) {
     return searchModeName(v);
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    return v;
   } else {
     std::ostringstream out;
     out << v;
@@ -43,7 +45,7 @@ bool inNamespaces(const std::string& name) {
 }  // namespace
 
 const std::vector<std::string>& detectorParameterNamespaces() {
-  static const std::vector<std::string> namespaces = {"orb", "index", "similarity", "filter", "detector", "verification"};
+  static const std::vector<std::string> namespaces = {"orb", "index", "similarity", "filter", "detector", "verification", "scoring"};
   return namespaces;
 }
 
@@ -59,6 +61,8 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
       if (auto v = source.getDouble(name)) field = *v;
     } else if constexpr (std::is_same_v<T, std::vector<double>>) {
       if (auto v = source.getDoubleList(name)) field = *v;
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (auto v = source.getString(name)) field = *v;
     } else if constexpr (std::is_same_v<T, SearchMode>) {
       if (auto v = source.getString(name)) {
         if (*v == "index") field = SearchMode::kIndex;

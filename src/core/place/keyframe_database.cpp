@@ -160,24 +160,67 @@ DescriptorList KeyframeDatabase::descriptors(KeyframeIndex k) const {
 }
 
 QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_limit, SearchMode mode) const {
-  return query(descriptorsFromMat(q), candidate_limit, mode);
+  return query(descriptorsFromMat(q), candidate_limit, mode, nullptr);
 }
 
-QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candidate_limit, SearchMode mode) const {
-  const KeyframeIndex n = static_cast<KeyframeIndex>(std::min<size_t>(candidate_limit, size()));
+namespace {
+
+double medianOf(std::vector<double>& v) {
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(mid), v.end());
+  return v[mid];
+}
+
+// The near-past band (NearPastRule) from matched[k]: query features with a match in keyframe k,
+// for k < limit.
+KeyframeIndex nearPastBand(const std::vector<uint32_t>& matched, KeyframeIndex limit, const NearPastRule& rule) {
+  const KeyframeIndex floor = std::min(rule.floor, limit);
+  const KeyframeIndex session = limit - floor;
+  if (session == 0) return 0;
+  // The background may include earlier sessions: they show elsewhere as well as anything does.
+  if (limit < static_cast<KeyframeIndex>(rule.min_background)) return session;
+  const KeyframeIndex window = std::min<KeyframeIndex>(limit, static_cast<KeyframeIndex>(std::max(1, rule.background)));
+  std::vector<double> level(window);
+  for (KeyframeIndex i = 0; i < window; ++i) level[i] = matched[limit - 1 - i];
+  const double centre = medianOf(level);
+  for (double& v : level) v = std::abs(v - centre);
+  const double threshold = centre + rule.kappa * 1.4826 * medianOf(level);
+  KeyframeIndex band = 0;
+  int below = 0;
+  for (KeyframeIndex k = limit; k-- > floor;) {
+    if (matched[k] > threshold) {
+      band = limit - k;
+      below = 0;
+    } else if (++below > rule.tolerance) {
+      break;
+    }
+  }
+  return band;
+}
+
+}  // namespace
+
+QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candidate_limit, SearchMode mode,
+                                    const NearPastRule* near_past) const {
+  KeyframeIndex n = static_cast<KeyframeIndex>(std::min<size_t>(candidate_limit, size()));
   QueryResult result;
-  result.similarity.assign(n, 0.0);
   QueryStats& stats = result.stats;
   stats.query_features = q.size();
-  if (n == 0 || q.empty()) return result;
+  if (n == 0 || q.empty()) {
+    result.similarity.assign(n, 0.0);
+    return result;
+  }
 
   const SimilarityParams& sp = params_.similarity;
   const FeatureId id_limit = keyframe_offsets_[n];
   const int d0 = sp.max_distance;
   const int tp = sp.early_termination_threshold;
-  VoteAccumulator accumulator(sp, n, result.similarity);
+  // First every query feature's votes (pairs within d0), then the limit (the near past may lower
+  // it), then the similarity from the votes below the limit.
   std::vector<Vote> votes;
-
+  std::vector<size_t> vote_end;
+  vote_end.reserve(q.size());
+  std::vector<Vote> feature_votes;
   std::vector<FeatureId> candidates;
   struct Survivor {
     FeatureId id;
@@ -185,12 +228,12 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   };
   std::vector<Survivor> survivors;
   for (const Descriptor& f : q) {
-    votes.clear();
+    feature_votes.clear();
     if (mode == SearchMode::kExact) {
       stats.full_distances += id_limit;
       for (FeatureId id = 0; id < id_limit; ++id) {
         const int d = fullDistance(f, id);
-        if (d <= d0) votes.push_back({id, 0, phi_(d)});
+        if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
       }
     } else {
       ProbeCounters counters;
@@ -217,16 +260,47 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
         const Tail& tail = tails_[id];
         const int d = partial + popcount64(f.words[1] ^ tail[0]) + popcount64(f.words[2] ^ tail[1]) +
                       popcount64(f.words[3] ^ tail[2]);
-        if (d <= d0) votes.push_back({id, 0, phi_(d)});
+        if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
       }
-      removeDuplicateVotes(votes);
+      removeDuplicateVotes(feature_votes);
       stats.buckets_probed += counters.buckets_probed;
       stats.candidates_visited += counters.entries_visited;
     }
     // Only votes need their keyframe, and they are few: look it up rather than store it per feature.
-    for (Vote& v : votes) v.keyframe = keyframeOf(v.feature);
-    stats.votes += votes.size();
-    accumulator.addFeatureVotes(votes);
+    for (Vote& v : feature_votes) v.keyframe = keyframeOf(v.feature);
+    stats.votes += feature_votes.size();
+    votes.insert(votes.end(), feature_votes.begin(), feature_votes.end());
+    vote_end.push_back(votes.size());
+  }
+
+  if (near_past != nullptr) {
+    std::vector<uint32_t> matched(n, 0);
+    std::vector<uint32_t> last_feature(n, 0);
+    size_t begin = 0;
+    for (size_t i = 0; i < vote_end.size(); ++i) {
+      for (size_t v = begin; v < vote_end[i]; ++v) {
+        const KeyframeIndex k = votes[v].keyframe;
+        if (last_feature[k] != i + 1) {
+          last_feature[k] = static_cast<uint32_t>(i + 1);
+          ++matched[k];
+        }
+      }
+      begin = vote_end[i];
+    }
+    result.near_past = nearPastBand(matched, n, *near_past);
+    n -= result.near_past;
+  }
+
+  result.similarity.assign(n, 0.0);
+  VoteAccumulator accumulator(sp, n, result.similarity);
+  size_t begin = 0;
+  for (size_t i = 0; i < vote_end.size(); ++i) {
+    feature_votes.clear();
+    for (size_t v = begin; v < vote_end[i]; ++v) {
+      if (votes[v].keyframe < n) feature_votes.push_back(votes[v]);
+    }
+    begin = vote_end[i];
+    accumulator.addFeatureVotes(feature_votes);
   }
 
   if (sp.normalize_by_feature_counts) {
@@ -239,8 +313,8 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
 }
 
 QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit,
-                                             SearchMode mode) {
-  QueryResult result = query(descriptors, candidate_limit, mode);
+                                             SearchMode mode, const NearPastRule* near_past) {
+  QueryResult result = query(descriptors, candidate_limit, mode, near_past);
   insert(descriptors);
   return result;
 }

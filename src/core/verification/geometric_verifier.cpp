@@ -6,6 +6,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/verification/inlier_layout.hpp"
 
 namespace mild {
 namespace {
@@ -82,11 +83,16 @@ GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, co
   }
   out.inlier_mask.assign(mask.begin<uint8_t>(), mask.end<uint8_t>());
   int inliers = 0;
+  std::vector<cv::Point2f> q_in, t_in;
   for (size_t i = 0; i < out.inlier_mask.size(); ++i) {
     if (!out.inlier_mask[i]) continue;
     ++inliers;
     out.verification.inlier_matches.push_back(out.matches[i]);
+    q_in.push_back(p1[i]);
+    t_in.push_back(p2[i]);
   }
+  out.verification.coverage = std::min(inlierCoverage(query, q_in), inlierCoverage(train, t_in));
+  out.verification.homography_share = homographyShare(q_in, t_in);
   out.verification.inliers = inliers;
   out.verification.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(out.matches.size());
   out.verification.verified = inliers >= params_.min_inliers;

@@ -2,6 +2,8 @@
 
 #include <vector>
 
+#include "mild_lcd/filter/temporal_filter.hpp"
+
 namespace mild {
 
 // Bayesian filter over the similarity vector (seed paper III.A: "Bayesian inference employs
@@ -39,38 +41,25 @@ namespace mild {
 //
 // Causal: the state after keyframe t depends only on similarities up to t; nothing published for a
 // keyframe is revised later (the original MILD code rewrote loop flags up to three frames late).
-struct FilterParams {
-  double loop_persistence = 0.95;
-  double loop_onset = 0.01;
-  std::vector<double> motion_kernel = {0.3, 1.0, 0.6};  // weights of advancing 0, 1, 2 keyframes
-  double no_loop_likelihood = 8.0;
-  int candidate_window = 3;
-
-  void validate() const;  // throws InvalidInput naming the first invalid field
-};
-
-// Robust standardisation used for the likelihood: (s - median) / (1.4826 MAD), falling back to the
-// mean absolute deviation from the median when more than half the values are equal, and to all
-// zeros when every value is equal.
-std::vector<double> robustSaliency(const std::vector<double>& similarity);
-
-class LoopFilter {
+class ExclusiveHypothesisFilter : public TemporalFilter {
  public:
-  explicit LoopFilter(const FilterParams& params = {});
+  static constexpr const char* kName = "exclusive_hypotheses";
+  explicit ExclusiveHypothesisFilter(const FilterParams& params = {});
   const FilterParams& params() const { return params_; }
+  const char* name() const override { return kName; }
 
-  // Advances one keyframe. similarity[j] is the current keyframe's similarity to eligible keyframe
-  // j; the eligible set is a prefix of the database that may grow between calls (a shorter vector
-  // means the database was cut, and the state beyond it is dropped). Returns the loop probability
-  // of every eligible keyframe (posterior mass within +-candidate_window).
-  const std::vector<double>& update(const std::vector<double>& similarity);
+  // Returns the posterior mass within +-candidate_window of every eligible keyframe.
+  const std::vector<double>& update(const std::vector<double>& similarity) override;
 
-  const std::vector<double>& loopProbability() const { return windowed_; }
+  const std::vector<double>& loopProbability() const override { return windowed_; }
   const std::vector<double>& posterior() const { return posterior_; }
   double noLoopProbability() const { return no_loop_; }
-  void reset();
-  // For persistence: replaces the state (non-negative, summing with no_loop to 1 within 1e-6).
+  size_t stateKeyframes() const override { return posterior_.size(); }
+  void reset() override;
+  // Replaces the state (non-negative, summing with no_loop to 1 within 1e-6).
   void setState(std::vector<double> posterior, double no_loop);
+  std::vector<uint8_t> saveState() const override;
+  void loadState(const std::vector<uint8_t>& bytes) override;
 
  private:
   FilterParams params_;

@@ -1,6 +1,7 @@
-#include "mild_lcd/filter/loop_filter.hpp"
+#include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
 
 #include <algorithm>
+#include <cstring>
 #include <cmath>
 #include <numeric>
 #include <string>
@@ -9,70 +10,18 @@
 
 namespace mild {
 
-void FilterParams::validate() const {
-  auto probability = [](double v, const char* name) {
-    if (!(v >= 0.0 && v <= 1.0)) throw InvalidInput(std::string(name) + " must be a probability in [0, 1], got " + std::to_string(v));
-  };
-  probability(loop_persistence, "filter/loop_persistence");
-  probability(loop_onset, "filter/loop_onset");
-  if (motion_kernel.empty() || motion_kernel.size() > 64) {
-    throw InvalidInput("filter/motion_kernel must list 1 to 64 weights (advancing 0, 1, 2, ... keyframes)");
-  }
-  double total = 0.0;
-  for (double w : motion_kernel) {
-    if (!(w >= 0.0) || !std::isfinite(w)) throw InvalidInput("filter/motion_kernel weights must be >= 0");
-    total += w;
-  }
-  if (!(total > 0.0)) throw InvalidInput("filter/motion_kernel needs at least one positive weight");
-  if (!(no_loop_likelihood > 0.0) || !std::isfinite(no_loop_likelihood)) {
-    throw InvalidInput("filter/no_loop_likelihood must be a positive number, got " + std::to_string(no_loop_likelihood));
-  }
-  if (candidate_window < 0) throw InvalidInput("filter/candidate_window must be >= 0, got " + std::to_string(candidate_window));
-}
-
-namespace {
-
-// Median with the two middle values averaged for an even count; reorders its argument.
-double median(std::vector<double>& v) {
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<long>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + static_cast<long>(mid)));
-}
-
-}  // namespace
-
-std::vector<double> robustSaliency(const std::vector<double>& similarity) {
-  std::vector<double> z(similarity.size(), 0.0);
-  if (similarity.empty()) return z;
-  std::vector<double> work = similarity;
-  const double centre = median(work);
-  double mean_abs = 0.0;
-  for (size_t j = 0; j < similarity.size(); ++j) {
-    work[j] = std::abs(similarity[j] - centre);
-    mean_abs += work[j];
-  }
-  mean_abs /= static_cast<double>(similarity.size());
-  double scale = 1.4826 * median(work);  // consistent with the standard deviation of a normal
-  if (!(scale > 0.0)) scale = 1.2533 * mean_abs;
-  if (!(scale > 0.0) || !std::isfinite(scale)) return z;
-  for (size_t j = 0; j < similarity.size(); ++j) z[j] = (similarity[j] - centre) / scale;
-  return z;
-}
-
-LoopFilter::LoopFilter(const FilterParams& params) : params_((params.validate(), params)) {
+ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const FilterParams& params) : params_((params.validate(), params)) {
   const double total = std::accumulate(params_.motion_kernel.begin(), params_.motion_kernel.end(), 0.0);
   for (double w : params_.motion_kernel) kernel_.push_back(w / total);
 }
 
-void LoopFilter::reset() {
+void ExclusiveHypothesisFilter::reset() {
   posterior_.clear();
   windowed_.clear();
   no_loop_ = 1.0;
 }
 
-void LoopFilter::setState(std::vector<double> posterior, double no_loop) {
+void ExclusiveHypothesisFilter::setState(std::vector<double> posterior, double no_loop) {
   double total = no_loop;
   for (double p : posterior) {
     if (!(p >= 0.0) || !std::isfinite(p)) throw InvalidInput("filter state must hold non-negative probabilities");
@@ -84,7 +33,33 @@ void LoopFilter::setState(std::vector<double> posterior, double no_loop) {
   windowed_.clear();
 }
 
-const std::vector<double>& LoopFilter::update(const std::vector<double>& similarity) {
+// Layout: u32 count, count doubles (the posterior), one double (no loop). Native byte order, as the
+// rest of the database file.
+std::vector<uint8_t> ExclusiveHypothesisFilter::saveState() const {
+  std::vector<uint8_t> out(sizeof(uint32_t) + (posterior_.size() + 1) * sizeof(double));
+  const uint32_t n = static_cast<uint32_t>(posterior_.size());
+  std::memcpy(out.data(), &n, sizeof(n));
+  if (n > 0) std::memcpy(out.data() + sizeof(n), posterior_.data(), n * sizeof(double));
+  std::memcpy(out.data() + sizeof(n) + n * sizeof(double), &no_loop_, sizeof(double));
+  return out;
+}
+
+void ExclusiveHypothesisFilter::loadState(const std::vector<uint8_t>& bytes) {
+  uint32_t n = 0;
+  if (bytes.size() < sizeof(n) + sizeof(double)) throw InvalidInput("filter state too short");
+  std::memcpy(&n, bytes.data(), sizeof(n));
+  if (bytes.size() != sizeof(n) + (static_cast<size_t>(n) + 1) * sizeof(double)) {
+    throw InvalidInput("filter state of " + std::to_string(bytes.size()) + " bytes does not hold " + std::to_string(n) +
+                       " probabilities");
+  }
+  std::vector<double> posterior(n);
+  if (n > 0) std::memcpy(posterior.data(), bytes.data() + sizeof(n), n * sizeof(double));
+  double no_loop = 0.0;
+  std::memcpy(&no_loop, bytes.data() + sizeof(n) + n * sizeof(double), sizeof(double));
+  setState(std::move(posterior), no_loop);
+}
+
+const std::vector<double>& ExclusiveHypothesisFilter::update(const std::vector<double>& similarity) {
   const size_t n = similarity.size();
   if (n < posterior_.size()) {  // the database was cut: what was beyond it is "no loop" now
     for (size_t j = n; j < posterior_.size(); ++j) no_loop_ += posterior_[j];

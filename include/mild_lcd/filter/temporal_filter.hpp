@@ -1,0 +1,61 @@
+#pragma once
+
+// The temporal stage of the detector: it turns each keyframe's similarity vector into a loop
+// probability per stored keyframe, using what earlier keyframes showed (temporal coherence). The
+// detector owns one through this interface; which one is a parameter (filter/type), and the
+// database file records it, so that a saved run is only resumed by the filter that wrote it.
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace mild {
+
+struct FilterParams {
+  // "exclusive_hypotheses" (the default: ExclusiveHypothesisFilter) or "independent_binary" (the
+  // 2017 MILD design: IndependentBinaryFilter).
+  std::string type = "exclusive_hypotheses";
+  double loop_persistence = 0.95;
+  double loop_onset = 0.01;
+  std::vector<double> motion_kernel = {0.3, 1.0, 0.6};  // weights of advancing 0, 1, 2 keyframes
+  double no_loop_likelihood = 8.0;
+  int candidate_window = 3;
+
+  void validate() const;  // throws InvalidInput naming the first invalid field
+};
+
+class TemporalFilter {
+ public:
+  virtual ~TemporalFilter() = default;
+
+  // Recorded in database files; a saved state is only loaded into a filter of the same name.
+  virtual const char* name() const = 0;
+
+  // Advances one keyframe. similarity[j] is the current keyframe's similarity to eligible keyframe
+  // j; the eligible set is a prefix of the database that may grow or shrink between calls (what
+  // lies beyond a shorter prefix is forgotten). Returns the loop probability of every eligible
+  // keyframe. Causal: nothing returned for an earlier keyframe is ever revised.
+  virtual const std::vector<double>& update(const std::vector<double>& similarity) = 0;
+  virtual const std::vector<double>& loopProbability() const = 0;
+  // How many keyframes the state covers (the eligible prefix of the last update).
+  virtual size_t stateKeyframes() const = 0;
+  virtual void reset() = 0;
+
+  // The state as bytes and back, bit-exact (a resumed run continues exactly). loadState throws
+  // InvalidInput, changing nothing, for bytes that are not a state of this filter.
+  virtual std::vector<uint8_t> saveState() const = 0;
+  virtual void loadState(const std::vector<uint8_t>& bytes) = 0;
+};
+
+// The filter params.type names; throws InvalidInput for an unknown type.
+std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params);
+const std::vector<std::string>& temporalFilterTypes();
+
+// Robust standardisation of a similarity vector: (s - median) / (1.4826 MAD), falling back to the
+// mean absolute deviation from the median when more than half the values are equal, and to all
+// zeros when every value is equal.
+std::vector<double> robustSaliency(const std::vector<double>& similarity);
+
+}  // namespace mild

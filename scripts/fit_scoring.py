@@ -1,0 +1,181 @@
+#!/usr/bin/python3
+"""Fits the candidate scorer (config/default.yaml, section scoring) and cross-validates it.
+
+The scorer is a logistic model of five features of a verified candidate (candidate_scorer.hpp):
+logit of the filter's probability, ln(inliers), inlier ratio, inlier coverage, homography share.
+It is fitted by L2-regularised maximum likelihood (Newton's method) on every candidate that
+`mild_offline --details` wrote for sequences with ground truth: right pairs are 1, wrong ones 0,
+don't-care ones left out.
+
+Usage:
+  fit_scoring.py RUN [RUN ...] [--l2 0.01] [--cv] [--json OUT.json]
+RUN is NAME=SEQUENCE_DIR:DETAILS.csv (SEQUENCE_DIR holds gt_loops.txt). The kind of a run is its
+name without a trailing _s<seed> (pub_campus_s7 is a pub_campus): with --cv each kind is left out
+in turn, the scorer fitted on the others and scored on the runs of the kind left out (recall@100%P,
+AP, and precision/recall at probability >= 0.5). Prints the fit on all runs as a YAML section.
+"""
+import json
+import math
+import re
+import sys
+
+import numpy as np
+
+FEATURES = ["filter log-odds", "ln inliers", "inlier ratio", "coverage", "homography share"]
+
+
+def load_gt(seq):
+    truth, dont_care, queries = set(), set(), set()
+    with open(f"{seq}/gt_loops.txt") as f:
+        for line in f:
+            p = line.split()
+            if len(p) < 4 or p[0].startswith("#"):
+                continue
+            pair = (int(p[0]), int(p[1]))
+            if p[3] == "1":
+                truth.add(pair)
+                queries.add(pair[0])
+            else:
+                dont_care.add(pair)
+    return truth, dont_care, queries
+
+
+def features(row):
+    p = min(max(float(row["filter_probability"]), 1e-6), 1 - 1e-6)
+    return [math.log(p / (1 - p)), math.log(max(int(row["inliers"]), 1)), float(row["inlier_ratio"]),
+            float(row["coverage"]), float(row["homography_share"])]
+
+
+def load_run(spec, min_gap=40):
+    name, rest = spec.split("=", 1)
+    seq, details = rest.rsplit(":", 1)
+    truth, dont_care, queries = load_gt(seq)
+    rows = []
+    with open(details) as f:
+        header = f.readline().strip().split(",")
+        for line in f:
+            row = dict(zip(header, line.strip().split(",")))
+            i, j = int(row["query"]), int(row["candidate"])
+            if i - j < min_gap or row["verified"] != "1":
+                continue
+            label = 1 if (i, j) in truth else (-1 if (i, j) in dont_care else 0)
+            rows.append((i, j, features(row), label))
+    return {"name": name, "kind": re.sub(r"_s\d+$", "", name), "rows": rows, "queries": queries}
+
+
+def best_rows(runs, weights, bias):
+    """Each query's best candidate under the current weights: the one the evaluation (and a user
+    acting on the best candidate) sees."""
+    out = []
+    for r in runs:
+        best = {}
+        for row in r["rows"]:
+            i, _, f, lab = row
+            s = bias + float(np.dot(weights, f))
+            if i not in best or s > best[i][0]:
+                best[i] = (s, row)
+        out += [row for _, row in best.values()]
+    return out
+
+
+def fit(runs, l2, rounds=3):
+    """Fits on every candidate, then again on each query's best candidate under the weights found,
+    a few rounds: the probability of the candidate that is published as the best one is what
+    must be calibrated, and the best of several is more often a lucky wrong one than any one."""
+    rows = [row for r in runs for row in r["rows"]]
+    weights, bias = fit_rows(rows, l2)
+    for _ in range(rounds):
+        weights, bias = fit_rows(best_rows(runs, weights, bias), l2)
+    return weights, bias
+
+
+def fit_rows(rows, l2):
+    x = np.array([f for (_, _, f, lab) in rows if lab >= 0], dtype=float)
+    y = np.array([lab for (_, _, _, lab) in rows if lab >= 0], dtype=float)
+    x = np.hstack([x, np.ones((len(x), 1))])
+    w = np.zeros(x.shape[1])
+    penalty = l2 * np.eye(x.shape[1])
+    penalty[-1, -1] = 0.0  # the bias is not shrunk
+    for _ in range(100):
+        p = 1.0 / (1.0 + np.exp(-(x @ w)))
+        gradient = x.T @ (p - y) + penalty @ w
+        hessian = (x * (p * (1 - p))[:, None]).T @ x + penalty + 1e-9 * np.eye(x.shape[1])
+        step = np.linalg.solve(hessian, gradient)
+        w -= step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    return w[:-1], w[-1]
+
+
+def metrics(run, weights, bias):
+    best = {}
+    for i, j, f, lab in run["rows"]:
+        s = 1.0 / (1.0 + math.exp(-(bias + float(np.dot(weights, f)))))
+        if i not in best or s > best[i][0]:
+            best[i] = (s, lab)
+    ranked = sorted(best.values(), key=lambda v: -v[0])
+    n = max(1, len(run["queries"]))
+    tp = fp = 0
+    r100 = ap = prev = 0.0
+    k = 0
+    while k < len(ranked):
+        s = ranked[k][0]
+        while k < len(ranked) and ranked[k][0] == s:
+            tp += ranked[k][1] == 1
+            fp += ranked[k][1] == 0
+            k += 1
+        recall, precision = tp / n, tp / max(1, tp + fp)
+        if fp == 0:
+            r100 = recall
+        ap += precision * (recall - prev)
+        prev = recall
+    right = sum(1 for s, lab in ranked if s >= 0.5 and lab == 1)
+    wrong = sum(1 for s, lab in ranked if s >= 0.5 and lab == 0)
+    return {"recall_at_100_precision": r100, "average_precision": ap,
+            "precision_at_half": right / max(1, right + wrong) if right + wrong else 1.0,
+            "recall_at_half": right / n, "wrong_at_half": wrong}
+
+
+def main():
+    args = sys.argv[1:]
+    l2 = 0.01
+    if "--l2" in args:
+        l2 = float(args[args.index("--l2") + 1])
+        args.remove(args[args.index("--l2") + 1])
+        args.remove("--l2")
+    json_out = None
+    if "--json" in args:
+        json_out = args[args.index("--json") + 1]
+        args.remove(json_out)
+        args.remove("--json")
+    cv = "--cv" in args
+    specs = [a for a in args if not a.startswith("--")]
+    if not specs:
+        sys.exit(__doc__)
+    runs = [load_run(s) for s in specs]
+    report = {"cv": []}
+    if cv:
+        print("| left out | run | recall@100%P | AP | precision at p >= 0.5 | recall at p >= 0.5 |")
+        print("|---|---|---|---|---|---|")
+        for kind in sorted({r["kind"] for r in runs}):
+            w, b = fit([r for r in runs if r["kind"] != kind], l2)
+            for r in (r for r in runs if r["kind"] == kind):
+                m = metrics(r, w, b)
+                report["cv"].append({"kind": kind, "run": r["name"], **m})
+                print(f"| {kind} | {r['name']} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | "
+                      f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} |")
+    w, b = fit(runs, l2)
+    report["weights"] = [round(float(v), 3) for v in w]
+    report["bias"] = round(float(b), 3)
+    print("scoring:")
+    print(f"  # fitted by scripts/fit_scoring.py on {', '.join(r['name'] for r in runs)} (l2 {l2})")
+    print(f"  # features: {', '.join(FEATURES)}")
+    print(f"  weights: [{', '.join(f'{v:.3f}' for v in w)}]")
+    print(f"  bias: {b:.3f}")
+    if json_out:
+        with open(json_out, "w") as f:
+            json.dump(report, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,42 @@
+#include "mild_lcd/detector/candidate_scorer.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "mild_lcd/common/errors.hpp"
+
+namespace mild {
+
+void ScoringParams::validate() const {
+  if (weights.size() != static_cast<size_t>(CandidateScorer::kFeatures)) {
+    throw InvalidInput("scoring/weights must list " + std::to_string(CandidateScorer::kFeatures) +
+                       " numbers (filter log-odds, ln inliers, inlier ratio, coverage, homography share), got " +
+                       std::to_string(weights.size()));
+  }
+  for (double w : weights) {
+    if (!std::isfinite(w)) throw InvalidInput("scoring/weights must be finite numbers");
+  }
+  if (!std::isfinite(bias)) throw InvalidInput("scoring/bias must be a finite number");
+  if (!(decision_probability > 0.0 && decision_probability <= 1.0)) {
+    throw InvalidInput("scoring/decision_probability must be in (0, 1], got " + std::to_string(decision_probability));
+  }
+}
+
+CandidateScorer::CandidateScorer(const ScoringParams& params) : params_((params.validate(), params)) {}
+
+std::vector<double> CandidateScorer::features(double filter_probability, const Verification& v) {
+  const double p = std::clamp(filter_probability, 1e-6, 1.0 - 1e-6);
+  return {std::log(p / (1.0 - p)), std::log(std::max(1, v.inliers)), v.inlier_ratio, v.coverage, v.homography_share};
+}
+
+double CandidateScorer::probability(double filter_probability, const Verification& v) const {
+  if (!params_.enabled) return filter_probability;
+  if (!v.verified) return 0.0;
+  const std::vector<double> x = features(filter_probability, v);
+  double z = params_.bias;
+  for (int i = 0; i < kFeatures; ++i) z += params_.weights[i] * x[i];
+  return 1.0 / (1.0 + std::exp(-z));
+}
+
+}  // namespace mild
