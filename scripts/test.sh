@@ -1,6 +1,7 @@
 #!/bin/bash
 # Installs missing Debian packages, builds mild_lcd in .build/, runs every gtest and rostest, then
-# each libFuzzer target for FUZZ_SECONDS (30), and prints `N passed, N failed` as its last line.
+# each libFuzzer target for FUZZ_SECONDS (30), then the static checks (scripts/lint.sh: catkin_lint,
+# clang-format), and prints `N passed, N failed` as its last line.
 # Exits non-zero when anything failed or did not build.
 #   ./scripts/test.sh                                   # everything
 #   MILD_SANITIZE=address,undefined ./scripts/test.sh   # everything under ASan + UBSan (build/sanitize-address-undefined/)
@@ -57,6 +58,10 @@ else
 fi
 if [[ "${FUZZ_SECONDS:-30}" -gt 0 ]]; then
   FUZZ_SECONDS="${FUZZ_SECONDS:-30}" "$REPO/scripts/fuzz.sh" || echo "[mild_lcd] a fuzz target failed" >&2
+fi
+
+if [[ -z "${MILD_SANITIZE:-}" ]]; then
+  "$REPO/scripts/lint.sh" || echo "[mild_lcd] a static check failed" >&2
 fi
 
 verdict=0

@@ -34,8 +34,8 @@ std::vector<FeatureMatch> exactRatioMatches(const Features& a, const Features& b
 
 }  // namespace
 
-MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping, const std::vector<FeaturePair>& disjoint,
-                                     const PriorMeasurementParams& params) {
+MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping,
+                                     const std::vector<FeaturePair>& disjoint, const PriorMeasurementParams& params) {
   MeasuredPriors out;
   out.inlier_counts.assign(kDescriptorBits + 1, 0.0);
   out.outlier_counts.assign(kDescriptorBits + 1, 0.0);
@@ -65,7 +65,8 @@ MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping
     checkView(pair.b);
     if (pair.b->descriptors.empty()) continue;
     std::uniform_int_distribution<size_t> pick(0, pair.b->descriptors.size() - 1);
-    for (const Descriptor& d : pair.a->descriptors) out.outlier_counts[hammingDistance(d, pair.b->descriptors[pick(rng)])] += 1.0;
+    for (const Descriptor& d : pair.a->descriptors)
+      out.outlier_counts[hammingDistance(d, pair.b->descriptors[pick(rng)])] += 1.0;
   }
   return out;
 }

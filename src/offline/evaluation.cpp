@@ -33,11 +33,12 @@ GroundTruth loadGroundTruth(const std::string& path, long frames) {
     double overlap = 0.0;
     std::string is_true;
     if (!(row >> i >> j >> overlap >> is_true) || (is_true != "0" && is_true != "1")) {
-      throw InvalidInput(path + ":" + std::to_string(number) + ": expected 'i j overlap is_true' (is_true 0 or 1), got '" +
-                         line + "'");
+      throw InvalidInput(path + ":" + std::to_string(number) +
+                         ": expected 'i j overlap is_true' (is_true 0 or 1), got '" + line + "'");
     }
     if (j < 0 || i <= j || i > INT32_MAX || (frames >= 0 && i >= frames)) {
-      throw InvalidInput(path + ":" + std::to_string(number) + ": frame pair " + std::to_string(i) + " " + std::to_string(j) +
+      throw InvalidInput(path + ":" + std::to_string(number) + ": frame pair " + std::to_string(i) + " " +
+                         std::to_string(j) +
                          (frames >= 0 ? " is not 0 <= j < i < " + std::to_string(frames) + " (the sequence's frames)"
                                       : " is not 0 <= j < i"));
     }
@@ -50,7 +51,8 @@ GroundTruth loadGroundTruth(const std::string& path, long frames) {
     }
   }
   if (in.bad()) throw InvalidInput(path + ": read error");
-  if (gt.right.empty() && gt.dont_care.empty()) throw InvalidInput(path + ": holds no frame pairs (empty ground truth)");
+  if (gt.right.empty() && gt.dont_care.empty())
+    throw InvalidInput(path + ": holds no frame pairs (empty ground truth)");
   return gt;
 }
 
@@ -89,7 +91,8 @@ std::vector<ScoredPair> bestPerQuery(const std::vector<ScoredPair>& candidates, 
 
 Metrics evaluate(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, int min_gap) {
   std::vector<ScoredPair> ranked = bestPerQuery(candidates, min_gap);
-  std::stable_sort(ranked.begin(), ranked.end(), [](const ScoredPair& a, const ScoredPair& b) { return a.score > b.score; });
+  std::stable_sort(ranked.begin(), ranked.end(),
+                   [](const ScoredPair& a, const ScoredPair& b) { return a.score > b.score; });
 
   Metrics m;
   m.loop_queries = truth.loop_queries.size();
@@ -110,7 +113,8 @@ Metrics evaluate(const GroundTruth& truth, const std::vector<ScoredPair>& candid
     PrPoint p;
     p.score = score;
     p.recall = static_cast<double>(hit.size()) / loop_queries;
-    p.precision = static_cast<double>(m.true_positives) / static_cast<double>(std::max<size_t>(1, m.true_positives + m.false_positives));
+    p.precision = static_cast<double>(m.true_positives) /
+                  static_cast<double>(std::max<size_t>(1, m.true_positives + m.false_positives));
     m.curve.push_back(p);
     if (m.false_positives == 0) m.recall_at_100_precision = p.recall;
   }
@@ -118,7 +122,8 @@ Metrics evaluate(const GroundTruth& truth, const std::vector<ScoredPair>& candid
   for (const PrPoint& p : m.curve) {
     m.average_precision += p.precision * (p.recall - previous_recall);
     previous_recall = p.recall;
-    if (p.precision + p.recall > 0.0) m.max_f1 = std::max(m.max_f1, 2 * p.precision * p.recall / (p.precision + p.recall));
+    if (p.precision + p.recall > 0.0)
+      m.max_f1 = std::max(m.max_f1, 2 * p.precision * p.recall / (p.precision + p.recall));
   }
   return m;
 }
@@ -142,7 +147,8 @@ Decision decideAt(const GroundTruth& truth, const std::vector<ScoredPair>& candi
     }
   }
   if (d.right + d.wrong > 0) d.precision = static_cast<double>(d.right) / static_cast<double>(d.right + d.wrong);
-  d.recall = truth.loop_queries.empty() ? 0.0 : static_cast<double>(d.right) / static_cast<double>(truth.loop_queries.size());
+  d.recall =
+      truth.loop_queries.empty() ? 0.0 : static_cast<double>(d.right) / static_cast<double>(truth.loop_queries.size());
   return d;
 }
 

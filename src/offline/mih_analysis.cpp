@@ -220,14 +220,16 @@ Recommendation recommend(const std::vector<MihCost>& grid, double min_accuracy, 
     throw InvalidInput("no (m, r) in the range reaches accuracy " + std::to_string(min_accuracy) +
                        "; widen --m-range or --r-range");
   }
-  auto cost_of = [&](const MihCost& c) { return online ? c.complexity * database_features + c.fixed_cost : c.complexity; };
+  auto cost_of = [&](const MihCost& c) {
+    return online ? c.complexity * database_features + c.fixed_cost : c.complexity;
+  };
   rec.choice = *std::min_element(rec.candidates.begin(), rec.candidates.end(),
                                  [&](const MihCost& a, const MihCost& b) { return cost_of(a) < cost_of(b); });
   rec.cost = cost_of(rec.choice);
   std::ostringstream why;
   why.precision(3);
-  why << "(m, r) = (" << rec.choice.m << ", " << rec.choice.r << "): accuracy " << rec.choice.accuracy << " >= "
-      << min_accuracy << " at the least " << (online ? "online" : "offline") << " cost ";
+  why << "(m, r) = (" << rec.choice.m << ", " << rec.choice.r << "): accuracy " << rec.choice.accuracy
+      << " >= " << min_accuracy << " at the least " << (online ? "online" : "offline") << " cost ";
   if (online) {
     why << "E*N + E_fixed = " << rec.choice.complexity << " * " << database_features << " + " << rec.choice.fixed_cost;
   } else {

@@ -3,8 +3,8 @@
 #include <cmath>
 #include <string>
 
-#include <opencv2/imgcodecs.hpp>
 #include <sensor_msgs/image_encodings.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "mild_lcd/common/errors.hpp"
 
@@ -125,13 +125,18 @@ DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg, uint64_t max_
     decoded.release();
   }
   if (decoded.empty()) throw mild::InvalidInput("compressed image (format '" + msg.format + "') cannot be decoded");
-  refuseLargerThan(static_cast<uint64_t>(decoded.cols), static_cast<uint64_t>(decoded.rows), max_pixels, "decoded image");
+  refuseLargerThan(static_cast<uint64_t>(decoded.cols), static_cast<uint64_t>(decoded.rows), max_pixels,
+                   "decoded image");
   if (decoded.depth() == CV_16U) decoded.convertTo(decoded, CV_8U, 1.0 / 256.0);
   switch (decoded.channels()) {
-    case 1: return DecodedImage{decoded, mild::PixelFormat::kGray};
-    case 3: return DecodedImage{decoded, mild::PixelFormat::kBgr};  // imdecode yields BGR
-    case 4: return DecodedImage{decoded, mild::PixelFormat::kBgra};
-    default: throw mild::InvalidInput("compressed image has " + std::to_string(decoded.channels()) + " channels");
+    case 1:
+      return DecodedImage{decoded, mild::PixelFormat::kGray};
+    case 3:
+      return DecodedImage{decoded, mild::PixelFormat::kBgr};  // imdecode yields BGR
+    case 4:
+      return DecodedImage{decoded, mild::PixelFormat::kBgra};
+    default:
+      throw mild::InvalidInput("compressed image has " + std::to_string(decoded.channels()) + " channels");
   }
 }
 
@@ -238,8 +243,9 @@ mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request
       train = requestSide(request.train_descriptors, request.train_keypoints, "train", max_features);
     } else {
       if (!request.query_descriptors.empty() || !request.train_descriptors.empty()) {
-        throw mild::InvalidInput("descriptors were given but use_descriptors is false: set it to match them, "
-                                 "or leave them empty to match stored keyframes by id");
+        throw mild::InvalidInput(
+            "descriptors were given but use_descriptors is false: set it to match them, "
+            "or leave them empty to match stored keyframes by id");
       }
       auto q = stored(request.query_id);
       if (!q) throw mild::InvalidInput("unknown query_id " + std::to_string(request.query_id));

@@ -24,8 +24,8 @@ void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& 
   if (!failure_.empty()) {
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, failure_);
   } else if (c.dropped > reported_dropped_ || c.rejected > reported_rejected_) {
-    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu dropped, %zu rejected keyframes since start", c.dropped,
-                    c.rejected);
+    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu dropped, %zu rejected keyframes since start",
+                    c.dropped, c.rejected);
   } else {
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "running");
   }

@@ -14,11 +14,11 @@
 #include "mild_lcd/LoadDatabase.h"
 #include "mild_lcd/SaveDatabase.h"
 #include "mild_lcd/SparseMatch.h"
-#include "mild_lcd/verification/geometric_verifier.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/shared_detector.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
 
 namespace mild_lcd {
 

@@ -55,11 +55,14 @@ void KeyframeWorker::refreshSnapshot(const mild::LoopDetector& detector) {
 void KeyframeWorker::process(const KeyframeInput& input) {
   ProcessedKeyframe out;
   try {
-    out.header = input.image ? input.image->header : input.compressed ? input.compressed->header : input.keyframe->header;
+    out.header = input.image        ? input.image->header
+                 : input.compressed ? input.compressed->header
+                                    : input.keyframe->header;
     std::optional<uint64_t> id;
     mild::Features features;
     if (input.image || input.compressed) {
-      out.image = input.image ? imageFromMsg(*input.image, max_image_pixels_) : imageFromMsg(*input.compressed, max_image_pixels_);
+      out.image = input.image ? imageFromMsg(*input.image, max_image_pixels_)
+                              : imageFromMsg(*input.compressed, max_image_pixels_);
     } else {
       if (input.keyframe->has_id) id = input.keyframe->id;
       features = featuresFromMsg(*input.keyframe);

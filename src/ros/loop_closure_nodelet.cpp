@@ -11,9 +11,9 @@
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
-#include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
+#include <pluginlib/class_list_macros.hpp>
 
 #include "detector_diagnostics.hpp"
 #include "detector_services.hpp"
@@ -97,13 +97,17 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     if (settings_.use_image_input) subscribeImages(nh, pnh);
     if (settings_.use_keyframe_input) {
       keyframe_sub_ = nh.subscribe<mild_lcd::Keyframe>("keyframe", settings_.queue_size,
-                                                       [this](const mild_lcd::KeyframeConstPtr& m) { enqueue({nullptr, nullptr, m}); });
+                                                       [this](const mild_lcd::KeyframeConstPtr& m) {
+                                                         enqueue({nullptr, nullptr, m});
+                                                       });
     }
     const mild::DetectorParams& params = shared_.detector->params();
     NODELET_INFO("mild_lcd ready: %s%s%s, %d hash tables, exclusion %d keyframes, verification %s, maps in %s",
-                 settings_.use_image_input ? "image" : "", settings_.use_image_input && settings_.use_keyframe_input ? " and " : "",
+                 settings_.use_image_input ? "image" : "",
+                 settings_.use_image_input && settings_.use_keyframe_input ? " and " : "",
                  settings_.use_keyframe_input ? "keyframe input" : "", params.database.index.num_tables,
-                 params.candidates.exclusion_frames, params.verification.enabled ? "on" : "off", store_->directory().c_str());
+                 params.candidates.exclusion_frames, params.verification.enabled ? "on" : "off",
+                 store_->directory().c_str());
   }
 
   // image_transport's `compressed` plugin is not packaged for Debian's ROS; without it the
@@ -118,7 +122,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   void checkTransport(ros::NodeHandle& nh) const {
     if (decodesCompressedItself(nh)) return;
     const auto loadable = image_transport::ImageTransport(nh).getLoadableTransports();
-    if (std::find(loadable.begin(), loadable.end(), "image_transport/" + settings_.image_transport) != loadable.end()) return;
+    if (std::find(loadable.begin(), loadable.end(), "image_transport/" + settings_.image_transport) != loadable.end())
+      return;
     std::string names;
     for (const auto& t : loadable) names += (names.empty() ? "" : ", ") + t.substr(t.find('/') + 1);
     throw mild::InvalidInput("parameter ~image_transport: no transport plugin '" + settings_.image_transport +
@@ -130,12 +135,17 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     if (decodesCompressedItself(nh)) {
       const std::string topic = nh.resolveName("image") + "/compressed";
       compressed_sub_ = nh.subscribe<sensor_msgs::CompressedImage>(
-          topic, settings_.queue_size, [this](const sensor_msgs::CompressedImageConstPtr& m) { enqueue({nullptr, m, nullptr}); });
+          topic, settings_.queue_size, [this](const sensor_msgs::CompressedImageConstPtr& m) {
+            enqueue({nullptr, m, nullptr});
+          });
       NODELET_INFO("subscribed to %s (compressed images, decoded by mild_lcd)", topic.c_str());
       return;
     }
     image_sub_ = transport_->subscribe(
-        "image", settings_.queue_size, [this](const sensor_msgs::ImageConstPtr& m) { enqueue({m, nullptr, nullptr}); },
+        "image", settings_.queue_size,
+        [this](const sensor_msgs::ImageConstPtr& m) {
+          enqueue({m, nullptr, nullptr});
+        },
         ros::VoidPtr(), image_transport::TransportHints(settings_.image_transport, ros::TransportHints(), pnh));
     NODELET_INFO("subscribed to %s (transport %s)", image_sub_.getTopic().c_str(), settings_.image_transport.c_str());
   }
@@ -153,9 +163,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       const std::string message = store_->loadOnStart(shared_);
       if (!message.empty()) NODELET_INFO("%s", message.c_str());
     } catch (const std::exception& e) {
-      NODELET_FATAL("cannot load the map at start-up: %s. The file is left as it is; keyframes are refused and nothing "
-                    "is saved until a map is loaded with load_database (or the node restarts)",
-                    e.what());
+      NODELET_FATAL(
+          "cannot load the map at start-up: %s. The file is left as it is; keyframes are refused and nothing "
+          "is saved until a map is loaded with load_database (or the node restarts)",
+          e.what());
       throw;
     }
   }
@@ -185,7 +196,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       const size_t waiting = worker_->counters().queued;
       worker_->stop();
       if (waiting > 0) {
-        shutdownMessage(getName(), "shutting down: " + std::to_string(waiting) + " queued keyframes were not processed", true);
+        shutdownMessage(getName(), "shutting down: " + std::to_string(waiting) + " queued keyframes were not processed",
+                        true);
       }
     }
     if (store_ && shared_.detector) {

@@ -9,13 +9,13 @@
 
 #include <CLI/CLI.hpp>
 
-#include "common/tool_main.hpp"
 #include <cv_bridge/cv_bridge.h>
-#include <opencv2/imgcodecs.hpp>
 #include <ros/time.h>
 #include <rosbag/bag.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/image_encodings.h>
+#include <opencv2/imgcodecs.hpp>
+#include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
 #include "mild_lcd/Keyframe.h"
@@ -50,7 +50,8 @@ int main(int argc, char** argv) {
       header.stamp = ros::Time(start + seq.stamps[i]);
       header.frame_id = frame_id;
       if (!image_topic.empty()) {
-        bag.write(image_topic, header.stamp, cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, image).toImageMsg());
+        bag.write(image_topic, header.stamp,
+                  cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, image).toImageMsg());
         sensor_msgs::CompressedImage compressed;
         compressed.header = header;
         std::ifstream file(seq.frames[i], std::ios::binary);

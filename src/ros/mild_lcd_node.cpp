@@ -9,9 +9,13 @@
 #include <signal.h>
 
 #include <atomic>
+#include <cstring>
+#include <iostream>
 
 #include <nodelet/loader.h>
 #include <ros/ros.h>
+
+#include "mild_lcd/ros/node_settings.hpp"
 
 namespace {
 
@@ -22,6 +26,13 @@ void requestStop(int) { g_stop = true; }
 }  // namespace
 
 int main(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--help-parameters") == 0) {  // no master needed
+      std::cout << mild_lcd::nodeSettingsMarkdown()
+                << "\nThe detector's parameters (orb/, index/, ...): config/default.yaml.\n";
+      return 0;
+    }
+  }
   ros::init(argc, argv, "mild_lcd", ros::init_options::NoSigintHandler);
   signal(SIGINT, requestStop);
   signal(SIGTERM, requestStop);

@@ -24,9 +24,11 @@ void visitSettings(NodeSettings& s, Visit&& visit) {
   visit("max_image_pixels", s.max_image_pixels, "larger images (width x height) are refused before decoding");
   visit("database_dir", s.database_dir,
         "the only folder maps are saved to and loaded from (default: database_path's folder, else $ROS_HOME/mild_lcd)");
-  visit("database_path", s.database_path, "map file inside database_dir: default of the services, and of load_on_start/save_on_shutdown");
+  visit("database_path", s.database_path,
+        "map file inside database_dir: default of the services, and of load_on_start/save_on_shutdown");
   visit("load_on_start", s.load_on_start, "load database_path at start-up, as a new session");
-  visit("save_on_shutdown", s.save_on_shutdown, "save to database_path on shutdown (never after a failed start-up load)");
+  visit("save_on_shutdown", s.save_on_shutdown,
+        "save to database_path on shutdown (never after a failed start-up load)");
   visit("max_database_mb", s.max_database_mb, "database files larger than this are refused unread");
   visit("max_match_features", s.max_match_features, "descriptors per side of a sparse_match request, at most");
 }
@@ -44,8 +46,8 @@ std::string toText(const T& v) {
 
 void requireRange(const std::string& name, int value, int lo, int hi) {
   if (value < lo || value > hi) {
-    throw InvalidInput("parameter ~" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                       std::to_string(value));
+    throw InvalidInput("parameter ~" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                       "], got " + std::to_string(value));
   }
 }
 
@@ -55,10 +57,20 @@ const std::vector<SettingDoc>& nodeSettingDocs() {
   static const std::vector<SettingDoc> docs = [] {
     std::vector<SettingDoc> out;
     NodeSettings defaults;
-    visitSettings(defaults, [&](const char* name, auto& field, const char* doc) { out.push_back({name, toText(field), doc}); });
+    visitSettings(defaults, [&](const char* name, auto& field, const char* doc) {
+      out.push_back({name, toText(field), doc});
+    });
     return out;
   }();
   return docs;
+}
+
+std::string nodeSettingsMarkdown() {
+  std::ostringstream out;
+  out << "| parameter | default | meaning |\n|---|---|---|\n";
+  for (const SettingDoc& d : nodeSettingDocs())
+    out << "| `~" << d.name << "` | `" << d.default_value << "` | " << d.doc << " |\n";
+  return out.str();
 }
 
 NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::string& default_dir) {
@@ -87,7 +99,8 @@ NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::
   requireRange("max_image_pixels", s.max_image_pixels, 1, 1 << 30);
   requireRange("max_database_mb", s.max_database_mb, 1, 1 << 24);
   requireRange("max_match_features", s.max_match_features, 1, 10000000);
-  if (s.image_transport.empty()) throw InvalidInput("parameter ~image_transport must name a transport (raw, compressed, ...)");
+  if (s.image_transport.empty())
+    throw InvalidInput("parameter ~image_transport must name a transport (raw, compressed, ...)");
 
   namespace fs = std::filesystem;
   if ((s.load_on_start || s.save_on_shutdown) && s.database_path.empty()) {

@@ -7,13 +7,20 @@ namespace {
 
 const char* typeName(const XmlRpc::XmlRpcValue& v) {
   switch (v.getType()) {
-    case XmlRpc::XmlRpcValue::TypeBoolean: return "a boolean";
-    case XmlRpc::XmlRpcValue::TypeInt: return "an integer";
-    case XmlRpc::XmlRpcValue::TypeDouble: return "a number";
-    case XmlRpc::XmlRpcValue::TypeString: return "a string";
-    case XmlRpc::XmlRpcValue::TypeArray: return "a list";
-    case XmlRpc::XmlRpcValue::TypeStruct: return "a map";
-    default: return "an unsupported value";
+    case XmlRpc::XmlRpcValue::TypeBoolean:
+      return "a boolean";
+    case XmlRpc::XmlRpcValue::TypeInt:
+      return "an integer";
+    case XmlRpc::XmlRpcValue::TypeDouble:
+      return "a number";
+    case XmlRpc::XmlRpcValue::TypeString:
+      return "a string";
+    case XmlRpc::XmlRpcValue::TypeArray:
+      return "a list";
+    case XmlRpc::XmlRpcValue::TypeStruct:
+      return "a map";
+    default:
+      return "an unsupported value";
   }
 }
 

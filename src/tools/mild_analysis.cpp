@@ -11,15 +11,15 @@
 
 #include <CLI/CLI.hpp>
 
-#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
-#include "mild_lcd/offline/distance_priors.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/offline/distance_priors.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/mih_analysis.hpp"
 #include "offline_plots.hpp"
 
@@ -62,7 +62,8 @@ std::pair<int, int> parseRange(const std::string& text, const char* what) {
 }
 
 json costJson(const mild::MihCost& c) {
-  return {{"m", c.m}, {"r", c.r}, {"R", c.accuracy}, {"E", c.complexity}, {"E_fixed", c.fixed_cost}, {"probes", c.probes}};
+  return {{"m", c.m},          {"r", c.r}, {"R", c.accuracy}, {"E", c.complexity}, {"E_fixed", c.fixed_cost},
+          {"probes", c.probes}};
 }
 
 json histogramJson(const std::vector<double>& counts) {
@@ -164,13 +165,15 @@ int measurePriors(const Options& opt) {
     std::cout << summary.dump() << "\n";
   } else {
     std::printf("%zu inlier correspondences from %zu of %zu overlapping pairs; %zu disjoint pairs\n",
-                measured.inlier_descriptors.size(), measured.overlapping_pairs_used, overlapping.size(), disjoint.size());
+                measured.inlier_descriptors.size(), measured.overlapping_pairs_used, overlapping.size(),
+                disjoint.size());
     std::printf("inliers:  mean %.1f, std %.1f bits   (paper: N(32, 10))\n", inliers.mean(), stddev(inliers));
     std::printf("outliers: mean %.1f, std %.1f bits   (paper: N(128, 20))\n", outliers.mean(), stddev(outliers));
     std::printf("inlier pairs the index finds, against R(r, m) from these priors:\n");
     for (const auto& v : validation) {
       std::printf("  (m, r) = (%2d, %d): index %.3f   R exact model %.3f   R paper model %.3f\n", v["m"].get<int>(),
-                  v["r"].get<int>(), v["index_found"].get<double>(), v["R_exact"].get<double>(), v["R_paper"].get<double>());
+                  v["r"].get<int>(), v["index_found"].get<double>(), v["R_exact"].get<double>(),
+                  v["R_paper"].get<double>());
     }
     if (!opt.output.empty()) std::printf("priors written to %s (use with --priors)\n", opt.output.c_str());
   }
@@ -205,8 +208,9 @@ int run(const Options& opt) {
     const bool online = !opt.offline;  // online unless asked otherwise: mild_lcd builds its tables live
     const mild::Recommendation rec = mild::recommend(grid, opt.min_accuracy, online, opt.database_features);
     if (opt.json) {
-      json out = {{"model", opt.model}, {"min_accuracy", opt.min_accuracy}, {"mode", online ? "online" : "offline"},
-                  {"recommended", json::array()}, {"choice", costJson(rec.choice)}, {"explanation", rec.explanation}};
+      json out = {
+          {"model", opt.model},           {"min_accuracy", opt.min_accuracy}, {"mode", online ? "online" : "offline"},
+          {"recommended", json::array()}, {"choice", costJson(rec.choice)},   {"explanation", rec.explanation}};
       for (const auto& c : rec.candidates) out["recommended"].push_back(costJson(c));
       std::cout << out.dump() << "\n";
     } else {
@@ -229,7 +233,8 @@ int run(const Options& opt) {
                 outliers.mean());
     std::printf(" r   m   R(accuracy)  E(complexity)  E_fixed     probes\n");
     for (const auto& c : grid) {
-      std::printf("%2d  %2d   %.4f       %.4e     %.3e   %.0f\n", c.r, c.m, c.accuracy, c.complexity, c.fixed_cost, c.probes);
+      std::printf("%2d  %2d   %.4f       %.4e     %.3e   %.0f\n", c.r, c.m, c.accuracy, c.complexity, c.fixed_cost,
+                  c.probes);
     }
   }
   return 0;
@@ -241,7 +246,8 @@ int main(int argc, char** argv) {
   CLI::App app{"MIH analysis: P_recall(r, m, d), accuracy R, complexity E, fixed cost E_fixed; advisor; priors."};
   app.name("mild_analysis");
   Options opt;
-  app.add_option("--model", opt.model, "where differing bits fall: paper (balls in bins) or exact (distinct bit positions)")
+  app.add_option("--model", opt.model,
+                 "where differing bits fall: paper (balls in bins) or exact (distinct bit positions)")
       ->capture_default_str();
   app.add_option("--inlier-mean", opt.inlier_mean, "inlier Hamming distance mean")->capture_default_str();
   app.add_option("--inlier-std", opt.inlier_std, "inlier standard deviation")->capture_default_str();
@@ -250,8 +256,9 @@ int main(int argc, char** argv) {
   app.add_option("--priors", opt.priors, "measured priors (JSON from --measure-priors) instead of the normal ones");
   app.add_option("--m-range", opt.m_range, "hash tables FIRST:LAST (2..64)")->capture_default_str();
   app.add_option("--r-range", opt.r_range, "probe radii FIRST:LAST (0..4)")->capture_default_str();
-  app.add_flag("--recommend", opt.recommend, "recommend (m, r): for each r the smallest m reaching --min-accuracy, "
-                                             "and the cheapest of those");
+  app.add_flag("--recommend", opt.recommend,
+               "recommend (m, r): for each r the smallest m reaching --min-accuracy, "
+               "and the cheapest of those");
   app.add_option("--min-accuracy", opt.min_accuracy, "accuracy R to reach")->capture_default_str();
   app.add_flag("--online", opt.online, "cost = E * database features + E_fixed (the default)");
   app.add_flag("--offline", opt.offline, "cost = E (tables built once)");
@@ -261,7 +268,8 @@ int main(int argc, char** argv) {
   app.add_option("--measure-priors", opt.measure_priors, "measure the priors on a sequence in the bench layout");
   app.add_option("--output", opt.output, "with --measure-priors: JSON file for --priors");
   app.add_option("--pairs", opt.pairs, "with --measure-priors: overlapping and disjoint pairs to use")
-      ->check(CLI::PositiveNumber)->capture_default_str();
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
   return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

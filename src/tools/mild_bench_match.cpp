@@ -9,19 +9,19 @@
 
 #include <CLI/CLI.hpp>
 
-#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/flann.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/verification/sparse_matcher.hpp"
 
 namespace {
@@ -61,8 +61,8 @@ double fastestMs(int repeats, F&& f) {
 // found (same train feature, or one at the same distance).
 struct Recovery {
   size_t valid = 0, recovered = 0;
-  void add(const std::vector<cv::DMatch>& bf, const std::vector<int>& found_train, const std::vector<int>& found_distance,
-           int valid_distance) {
+  void add(const std::vector<cv::DMatch>& bf, const std::vector<int>& found_train,
+           const std::vector<int>& found_distance, int valid_distance) {
     for (const cv::DMatch& m : bf) {
       if (m.distance >= valid_distance) continue;
       ++valid;
@@ -158,22 +158,24 @@ int run(const Options& opt) {
   }
   if (t_sparse.empty()) throw mild::InvalidInput(opt.images + ": no image pair with features to match");
 
-  const auto s = mild::tools::summarize(t_sparse), b = mild::tools::summarize(t_bf), k = mild::tools::summarize(t_bf_knn),
-             l = mild::tools::summarize(t_lsh);
+  const auto s = mild::tools::summarize(t_sparse), b = mild::tools::summarize(t_bf),
+             k = mild::tools::summarize(t_bf_knn), l = mild::tools::summarize(t_lsh);
   const size_t measured = t_sparse.size();
-  std::printf("%zu pairs (%zu loop-closing, the rest consecutive), %.0f ORB features per image (%d requested, frames "
-              "scaled x%.2g), 1 thread, fastest of %d runs\n",
-              measured, loop_pairs, static_cast<double>(features) / (2.0 * measured), opt.features, opt.scale, opt.repeats);
+  std::printf(
+      "%zu pairs (%zu loop-closing, the rest consecutive), %.0f ORB features per image (%d requested, frames "
+      "scaled x%.2g), 1 thread, fastest of %d runs\n",
+      measured, loop_pairs, static_cast<double>(features) / (2.0 * measured), opt.features, opt.scale, opt.repeats);
   std::printf("%-34s %10s %10s\n", "method (ms per pair)", "median", "p95");
-  const std::string sparse_name = "sparse match (m=" + std::to_string(opt.num_tables) + ", r=" + std::to_string(opt.radius) + ")";
+  const std::string sparse_name =
+      "sparse match (m=" + std::to_string(opt.num_tables) + ", r=" + std::to_string(opt.radius) + ")";
   std::printf("%-34s %10.3f %10.3f\n", sparse_name.c_str(), s.median, s.p95);
   std::printf("%-34s %10.3f %10.3f\n", "BFMatcher NORM_HAMMING 1-NN", b.median, b.p95);
   std::printf("%-34s %10.3f %10.3f\n", "BFMatcher k=2 + ratio 0.8", k.median, k.p95);
   std::printf("%-34s %10.3f %10.3f\n", "FLANN LSH(24,10,0) incl. build", l.median, l.p95);
   std::printf("valid pairs (BF nearest neighbour, distance < %d): %zu\n", opt.valid_distance, rec_sparse.valid);
   std::printf("recovered: sparse %.2f%%, LSH %.2f%%\n", 100 * rec_sparse.fraction(), 100 * rec_lsh.fraction());
-  std::printf("headline: sparse match is %.1fx faster than brute force and %.1fx faster than LSH\n", b.median / s.median,
-              l.median / s.median);
+  std::printf("headline: sparse match is %.1fx faster than brute force and %.1fx faster than LSH\n",
+              b.median / s.median, l.median / s.median);
   if (opt.json) {
     const nlohmann::json out = {{"pairs", measured},
                                 {"loop_pairs", loop_pairs},
@@ -213,7 +215,8 @@ int main(int argc, char** argv) {
   app.add_option("--tables", opt.num_tables, "sparse match m");
   app.add_option("--radius", opt.radius, "sparse match r");
   app.add_option("--valid-distance", opt.valid_distance, "brute-force pairs closer than this count as valid");
-  app.add_option("--scale", opt.scale, "resize frames by this factor before extraction (small frames yield few features)")
+  app.add_option("--scale", opt.scale,
+                 "resize frames by this factor before extraction (small frames yield few features)")
       ->check(CLI::PositiveNumber);
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
   return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });

@@ -1,7 +1,9 @@
 // mild_bench_scale: query cost of the keyframe database from 1,000 to 100,000 keyframes of 800
 // real ORB features, one thread. Per size, in one run: mild_lcd's MIH with and without early
-// termination, the original MILD (2017) index design, and exact brute force where it finishes in
-// reasonable time; memory per stored feature and insert time. Speed-ups are ratios within the run.
+// termination, our reproduction of the original MILD (2017) index design, faiss's multi-index
+// hashing (IndexBinaryMultiHash) and exact search (IndexBinaryFlat), and mild_lcd's own exact
+// brute force where these finish in reasonable time; memory per stored feature and insert time.
+// Speed-ups are ratios within the run.
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -9,24 +11,27 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <optional>
 #include <sstream>
 
 #include <CLI/CLI.hpp>
 
-#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include "common/tool_main.hpp"
 
+#include "bench/faiss_baselines.hpp"
 #include "bench/mild2017_index.hpp"
+#include "bench/sequence_keyframes.hpp"
 #include "bench/synthetic_keyframes.hpp"
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
-#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
 
 namespace fs = std::filesystem;
@@ -38,17 +43,22 @@ namespace {
 struct Options {
   std::string sizes = "1000,5000,10000,50000,100000";
   std::vector<std::string> images;
+  std::string sequence;
   int features = 800;
   int queries = 30;
   int brute_queries = 3;
   size_t brute_max_keyframes = 10000;
+  size_t faiss_max_keyframes = 10000;
+  int faiss_exact_queries = 1;
   bool skip_baseline = false;
   size_t persistence_keyframes = 5000;
   uint32_t bounded = 256;
   bool json = false;
 };
 
-double msSince(Clock::time_point start) { return std::chrono::duration<double, std::milli>(Clock::now() - start).count(); }
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
 
 std::vector<size_t> parseSizes(const std::string& text) {
   std::vector<size_t> out;
@@ -90,12 +100,14 @@ struct Timing {
 
 json nullable(std::optional<double> v) { return v ? json(*v) : json(nullptr); }
 
-// Save and load times of a detector holding n synthetic keyframes (with keypoints, as a real one).
-json measurePersistence(const mild::tools::SyntheticKeyframes& synthetic, size_t n) {
+using KeyframeAt = std::function<mild::DescriptorList(size_t)>;
+
+// Save and load times of a detector holding n keyframes (with keypoints, as a real one).
+json measurePersistence(const KeyframeAt& keyframe_at, size_t n) {
   mild::DetectorState state;
   state.next_id = n;
   for (size_t k = 0; k < n; ++k) {
-    state.descriptors.push_back(synthetic.keyframe(k));
+    state.descriptors.push_back(keyframe_at(k));
     mild::KeyframeRecord record;
     record.id = k;
     record.stamp = 0.1 * static_cast<double>(k);
@@ -118,30 +130,49 @@ json measurePersistence(const mild::tools::SyntheticKeyframes& synthetic, size_t
   const double load_s = msSince(t) / 1000.0;
   const double file_mb = static_cast<double>(fs::file_size(file)) / 1e6;
   fs::remove(file);
-  return {{"keyframes", n}, {"features", report.features}, {"file_mb", file_mb}, {"save_s", save_s}, {"load_s", load_s}};
+  return {
+      {"keyframes", n}, {"features", report.features}, {"file_mb", file_mb}, {"save_s", save_s}, {"load_s", load_s}};
 }
 
 int run(const Options& opt) {
   cv::setNumThreads(1);
-  const std::vector<size_t> sizes = parseSizes(opt.sizes);
   const std::vector<std::string> dirs = opt.images.empty() ? defaultImageDirs() : opt.images;
 
   mild::OrbParams orb;
   orb.num_features = opt.features;
   const mild::OrbExtractor extractor(orb);
-  std::vector<mild::DescriptorList> real;
-  for (const auto& dir : dirs) {
-    for (const auto& path : mild::tools::openImageSequence(dir).frames) {
-      const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-      if (!image.empty()) real.push_back(extractor.extract(image).descriptors);
-    }
-  }
-  const mild::tools::SyntheticKeyframes synthetic(std::move(real), static_cast<size_t>(opt.features));
+  // Keyframes: a real walk's frames (--sequence), or real frames replicated to any size.
+  std::optional<mild::tools::SequenceKeyframes> walk;
+  std::optional<mild::tools::SyntheticKeyframes> synthetic;
   std::vector<mild::DescriptorList> queries;
-  for (int q = 0; q < opt.queries; ++q) queries.push_back(synthetic.query(q));
-  if (!opt.json) {
-    std::printf("%zu real frames from %zu sequence(s); %d features per keyframe; %d queries per size; one thread\n",
-                synthetic.realFrames(), dirs.size(), opt.features, opt.queries);
+  KeyframeAt keyframe_at;
+  std::vector<size_t> sizes = parseSizes(opt.sizes);
+  if (!opt.sequence.empty()) {
+    walk.emplace(opt.sequence, extractor, opt.queries);
+    queries = walk->queries();
+    keyframe_at = [&walk](size_t k) { return walk->keyframe(k); };
+    // Prefixes of the walk, and the whole walk.
+    sizes.erase(std::remove_if(sizes.begin(), sizes.end(), [&](size_t n) { return n >= walk->size(); }), sizes.end());
+    sizes.push_back(walk->size());
+    if (!opt.json) {
+      std::printf("walk %s: %zu stored keyframes, %zu held-out queries; up to %d features per keyframe; one thread\n",
+                  opt.sequence.c_str(), walk->size(), queries.size(), opt.features);
+    }
+  } else {
+    std::vector<mild::DescriptorList> real;
+    for (const auto& dir : dirs) {
+      for (const auto& path : mild::tools::openImageSequence(dir).frames) {
+        const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+        if (!image.empty()) real.push_back(extractor.extract(image).descriptors);
+      }
+    }
+    synthetic.emplace(std::move(real), static_cast<size_t>(opt.features));
+    for (int q = 0; q < opt.queries; ++q) queries.push_back(synthetic->query(q));
+    keyframe_at = [&synthetic](size_t k) { return synthetic->keyframe(k); };
+    if (!opt.json) {
+      std::printf("%zu real frames from %zu sequence(s); %d features per keyframe; %d queries per size; one thread\n",
+                  synthetic->realFrames(), dirs.size(), opt.features, opt.queries);
+    }
   }
 
   mild::DatabaseParams et_params;  // the defaults: early termination at 20 of the first 64 bits
@@ -154,22 +185,29 @@ int run(const Options& opt) {
                 "mild2017_ms", "brute_ms", "B/feature", "insert_ms", "x2017", "xbrute");
   }
   for (size_t n : sizes) {
-    const size_t features = n * static_cast<size_t>(opt.features);
+    size_t features = n * static_cast<size_t>(opt.features);
+    if (walk) {
+      features = 0;
+      for (size_t k = 0; k < n; ++k) features += walk->keyframe(k).size();
+    }
     // mild_lcd needs ~100 bytes per feature, the 2017 design ~170; they are built one after the other.
     if (features * 200 > availableMemoryBytes()) {
-      if (!opt.json) std::printf("%9zu skipped: needs about %.1f GB, %.1f GB available\n", n, features * 200 / 1e9,
-                                 availableMemoryBytes() / 1e9);
+      if (!opt.json)
+        std::printf("%9zu skipped: needs about %.1f GB, %.1f GB available\n", n, features * 200 / 1e9,
+                    availableMemoryBytes() / 1e9);
       rows.push_back({{"keyframes", n}, {"skipped", "memory"}});
       continue;
     }
     json row = {{"keyframes", n}};
-    Timing mih, mih_et, baseline, brute;
+    Timing mih, mih_et, baseline, brute, faiss_mih, faiss_exact;
+    double faiss_bytes_per_feature = 0.0;
+    size_t faiss_mih_pairs = 0, faiss_exact_pairs = 0;  // of the first query, a check on both
     mild::QueryStats work;
     double insert_ms = 0.0, bytes_per_feature = 0.0;
     {
       mild::KeyframeDatabase db(et_params);
       const auto start = Clock::now();
-      for (size_t k = 0; k < n; ++k) db.insert(synthetic.keyframe(k));
+      for (size_t k = 0; k < n; ++k) db.insert(keyframe_at(k));
       insert_ms = msSince(start) / static_cast<double>(n);
       bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
       for (const auto& q : queries) {
@@ -200,7 +238,7 @@ int run(const Options& opt) {
       mild::DatabaseParams bounded_params = et_params;
       bounded_params.index.max_bucket_entries = opt.bounded;
       mild::KeyframeDatabase db(bounded_params);
-      for (size_t k = 0; k < n; ++k) db.insert(synthetic.keyframe(k));
+      for (size_t k = 0; k < n; ++k) db.insert(keyframe_at(k));
       for (const auto& q : queries) {
         auto t = Clock::now();
         const auto r = db.query(q);
@@ -208,9 +246,27 @@ int run(const Options& opt) {
         (void)r;
       }
     }
+    if (n <= opt.faiss_max_keyframes) {  // faiss, on the same descriptors, range search within d0
+      mild::tools::FaissBaselines faiss(static_cast<int>(et_params.index.num_tables));
+      for (size_t k = 0; k < n; ++k) faiss.add(keyframe_at(k));
+      faiss_bytes_per_feature = faiss.entryBytesPerFeature();
+      const int d0 = et_params.similarity.max_distance;
+      for (const auto& q : queries) {
+        auto t = Clock::now();
+        const size_t found = faiss.queryMultiHash(q, d0);
+        faiss_mih.samples.push_back(msSince(t));
+        if (&q == &queries.front()) faiss_mih_pairs = found;
+      }
+      for (int q = 0; q < std::min<int>(opt.faiss_exact_queries, static_cast<int>(queries.size())); ++q) {
+        auto t = Clock::now();
+        const size_t found = faiss.queryExact(queries[q], d0);
+        faiss_exact.samples.push_back(msSince(t));
+        if (q == 0) faiss_exact_pairs = found;
+      }
+    }
     if (!opt.skip_baseline) {
       mild::tools::Mild2017Index old(et_params);
-      for (size_t k = 0; k < n; ++k) old.insert(synthetic.keyframe(k));
+      for (size_t k = 0; k < n; ++k) old.insert(keyframe_at(k));
       for (const auto& q : queries) {
         auto t = Clock::now();
         const auto r = old.query(q);
@@ -219,7 +275,8 @@ int run(const Options& opt) {
       }
     }
     const std::optional<double> brute_ms = brute.samples.empty() ? std::nullopt : std::optional<double>(brute.median());
-    const std::optional<double> base_ms = baseline.samples.empty() ? std::nullopt : std::optional<double>(baseline.median());
+    const std::optional<double> base_ms =
+        baseline.samples.empty() ? std::nullopt : std::optional<double>(baseline.median());
     row["mih_ms_median"] = mih.median();
     row["mih_ms_p95"] = mih.p95();
     row["mih_et_ms_median"] = mih_et.median();
@@ -228,6 +285,18 @@ int run(const Options& opt) {
     row["baseline_2017_ms_median"] = nullable(base_ms);
     row["baseline_2017_ms_p95"] = base_ms ? json(baseline.p95()) : json(nullptr);
     row["brute_ms_median"] = nullable(brute_ms);
+    const std::optional<double> faiss_mih_ms =
+        faiss_mih.samples.empty() ? std::nullopt : std::optional<double>(faiss_mih.median());
+    const std::optional<double> faiss_exact_ms =
+        faiss_exact.samples.empty() ? std::nullopt : std::optional<double>(faiss_exact.median());
+    row["faiss_mih_ms_median"] = nullable(faiss_mih_ms);
+    row["faiss_mih_ms_p95"] = faiss_mih_ms ? json(faiss_mih.p95()) : json(nullptr);
+    row["faiss_exact_ms_median"] = nullable(faiss_exact_ms);
+    row["faiss_mih_pairs_first_query"] = faiss_mih_ms ? json(faiss_mih_pairs) : json(nullptr);
+    row["faiss_exact_pairs_first_query"] = faiss_exact_ms ? json(faiss_exact_pairs) : json(nullptr);
+    row["faiss_mih_bytes_per_feature"] = faiss_mih_ms ? json(faiss_bytes_per_feature) : json(nullptr);
+    row["speedup_vs_faiss_mih"] = faiss_mih_ms ? json(*faiss_mih_ms / mih_et.median()) : json(nullptr);
+    row["speedup_vs_faiss_exact"] = faiss_exact_ms ? json(*faiss_exact_ms / mih_et.median()) : json(nullptr);
     row["bytes_per_feature"] = bytes_per_feature;
     row["candidates_per_query_feature"] = static_cast<double>(work.candidates_visited) / work.query_features;
     row["full_distances_per_query_feature"] = static_cast<double>(work.full_distances) / work.query_features;
@@ -245,24 +314,36 @@ int run(const Options& opt) {
       };
       std::printf("%9zu %11.2f %11.2f %12.2f %12s %12s %10.1f %9.2f %9s %9s\n", n, mih.median(), mih_et.median(),
                   mih_et.p95(), cell(base_ms, "%.2f").c_str(), cell(brute_ms, "%.1f").c_str(), bytes_per_feature,
-                  insert_ms, cell(base_ms ? std::optional<double>(*base_ms / mih_et.median()) : std::nullopt, "%.1fx").c_str(),
+                  insert_ms,
+                  cell(base_ms ? std::optional<double>(*base_ms / mih_et.median()) : std::nullopt, "%.1fx").c_str(),
                   cell(brute_ms ? std::optional<double>(*brute_ms / mih_et.median()) : std::nullopt, "%.0fx").c_str());
-      if (!bounded.samples.empty()) std::printf("%9s bounded buckets (%u entries): %.2f ms\n", "", opt.bounded, bounded.median());
+      if (faiss_mih_ms) {
+        std::printf(
+            "%9s faiss IndexBinaryMultiHash: %.2f ms (p95 %.2f; %.1fx mild_lcd's time), ~%.0f B/feature;"
+            " IndexBinaryFlat: %s ms\n",
+            "", *faiss_mih_ms, faiss_mih.p95(), *faiss_mih_ms / mih_et.median(), faiss_bytes_per_feature,
+            cell(faiss_exact_ms, "%.1f").c_str());
+      }
+      if (!bounded.samples.empty())
+        std::printf("%9s bounded buckets (%u entries): %.2f ms\n", "", opt.bounded, bounded.median());
       std::printf("%9s per query feature: %.0f candidates, %.0f full distances, %.1f votes\n", "",
-                  row["candidates_per_query_feature"].get<double>(), row["full_distances_per_query_feature"].get<double>(),
-                  row["votes_per_query_feature"].get<double>());
+                  row["candidates_per_query_feature"].get<double>(),
+                  row["full_distances_per_query_feature"].get<double>(), row["votes_per_query_feature"].get<double>());
       std::fflush(stdout);
     }
   }
   // Growth: t(10k) / t(1k) when both were measured.
-  json out = {{"rows", rows}, {"features_per_keyframe", opt.features}, {"queries", opt.queries}};
-  if (opt.persistence_keyframes > 0) {
-    out["persistence"] = measurePersistence(synthetic, opt.persistence_keyframes);
+  json out = {{"rows", rows},
+              {"features_per_keyframe", opt.features},
+              {"queries", queries.size()},
+              {"keyframes_from", walk ? "sequence" : "replicated frames"}};
+  if (opt.persistence_keyframes > 0 && (!walk || opt.persistence_keyframes <= walk->size())) {
+    out["persistence"] = measurePersistence(keyframe_at, opt.persistence_keyframes);
     if (!opt.json) {
       const json& p = out["persistence"];
-      std::printf("database file, %zu keyframes x %d features: %.0f MB, save %.2f s, load %.2f s (index rebuilt)\n",
-                  opt.persistence_keyframes, opt.features, p["file_mb"].get<double>(), p["save_s"].get<double>(),
-                  p["load_s"].get<double>());
+      std::printf("database file, %zu keyframes, %zu features: %.0f MB, save %.2f s, load %.2f s (index rebuilt)\n",
+                  opt.persistence_keyframes, p["features"].get<size_t>(), p["file_mb"].get<double>(),
+                  p["save_s"].get<double>(), p["load_s"].get<double>());
     }
   }
   double t1k = 0, t10k = 0;
@@ -286,16 +367,28 @@ int main(int argc, char** argv) {
   app.name("mild_bench_scale");
   Options opt;
   app.add_option("--sizes", opt.sizes, "keyframe counts, comma-separated")->capture_default_str();
-  app.add_option("--images", opt.images, "sequences of real frames to replicate (default: ../shared/bench, else the sample)");
-  app.add_option("--features", opt.features, "features per keyframe")->check(CLI::PositiveNumber)->capture_default_str();
+  app.add_option("--images", opt.images,
+                 "sequences of real frames to replicate (default: ../shared/bench, else the sample)");
+  app.add_option("--sequence", opt.sequence,
+                 "build the databases from this walk's own frames in order (gen.py scale --frames N), not replicas")
+      ->check(CLI::ExistingDirectory);
+  app.add_option("--features", opt.features, "features per keyframe")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--queries", opt.queries, "queries per size")->check(CLI::PositiveNumber)->capture_default_str();
   app.add_option("--brute-queries", opt.brute_queries, "brute-force queries per size")->capture_default_str();
-  app.add_option("--brute-max-keyframes", opt.brute_max_keyframes, "largest size brute force runs at")->capture_default_str();
+  app.add_option("--brute-max-keyframes", opt.brute_max_keyframes, "largest size brute force runs at")
+      ->capture_default_str();
   app.add_flag("--skip-baseline", opt.skip_baseline, "do not build the 2017 design");
+  app.add_option("--faiss-max-keyframes", opt.faiss_max_keyframes, "largest size the faiss baselines run at (0: skip)")
+      ->capture_default_str();
+  app.add_option("--faiss-exact-queries", opt.faiss_exact_queries, "IndexBinaryFlat queries per size")
+      ->capture_default_str();
   app.add_option("--bounded", opt.bounded, "also time index/max_bucket_entries at this bound (0: skip)")
       ->capture_default_str();
   app.add_option("--persistence-keyframes", opt.persistence_keyframes,
-                 "time saving and loading a database of this many keyframes (0: skip)")->capture_default_str();
+                 "time saving and loading a database of this many keyframes (0: skip)")
+      ->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
   return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

@@ -10,17 +10,17 @@
 
 #include <CLI/CLI.hpp>
 
-#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
 #include "common/npy_writer.hpp"
 #include "common/progress_bar.hpp"
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/params/parameters.hpp"
 #include "offline_plots.hpp"
 
@@ -50,10 +50,14 @@ std::optional<std::pair<cv::Mat, mild::PixelFormat>> readFrame(const std::string
   if (image.depth() == CV_16U) image.convertTo(image, CV_8U, 1.0 / 256.0);
   if (image.depth() != CV_8U) return std::nullopt;
   switch (image.channels()) {
-    case 1: return std::make_pair(image, mild::PixelFormat::kGray);
-    case 3: return std::make_pair(image, mild::PixelFormat::kBgr);
-    case 4: return std::make_pair(image, mild::PixelFormat::kBgra);
-    default: return std::nullopt;
+    case 1:
+      return std::make_pair(image, mild::PixelFormat::kGray);
+    case 3:
+      return std::make_pair(image, mild::PixelFormat::kBgr);
+    case 4:
+      return std::make_pair(image, mild::PixelFormat::kBgra);
+    default:
+      return std::nullopt;
   }
 }
 
@@ -70,7 +74,8 @@ int run(const Options& opt) {
   }
   const mild::tools::ImageSequence seq = mild::tools::openImageSequence(opt.images, opt.fps);
   std::optional<mild::GroundTruth> truth;
-  if (!opt.gt.empty()) truth = mild::loadGroundTruth(opt.gt, static_cast<long>(seq.frames.size()));  // fail before the long run, not after
+  if (!opt.gt.empty())
+    truth = mild::loadGroundTruth(opt.gt, static_cast<long>(seq.frames.size()));  // fail before the long run, not after
   for (const auto& f : seq.ignored) std::cerr << "note: ignoring non-image file " << f << "\n";
 
   std::ofstream csv(opt.output);
@@ -113,22 +118,24 @@ int run(const Options& opt) {
       if (details.is_open()) {
         const mild::Verification& v = c.verification;
         details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
-                << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
-                << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
-                << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "\n";
+                << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << ","
+                << v.inliers << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << ","
+                << (v.verified ? 1 : 0) << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "\n";
       }
     }
     if (!similarity_matrix.empty()) {
       // Row = query frame, column = candidate frame (ids are frame indices).
       for (size_t k = 0; k < r.similarity.size(); ++k) {
-        similarity_matrix[i * n + detector.record(static_cast<mild::KeyframeIndex>(k)).id] = static_cast<float>(r.similarity[k]);
+        similarity_matrix[i * n + detector.record(static_cast<mild::KeyframeIndex>(k)).id] =
+            static_cast<float>(r.similarity[k]);
       }
     }
   }
   progress.finish();
   csv.close();
   if (!csv) throw mild::InvalidInput(opt.output + ": write failed");
-  if (skipped == n) throw mild::InvalidInput(seq.image_dir + ": none of the " + std::to_string(n) + " image files could be read");
+  if (skipped == n)
+    throw mild::InvalidInput(seq.image_dir + ": none of the " + std::to_string(n) + " image files could be read");
 
   std::cout << "processed " << (n - skipped) << " of " << n << " frames (" << skipped << " unreadable, skipped), "
             << features / std::max<size_t>(1, n - skipped) << " features per frame\n";
@@ -165,8 +172,8 @@ int run(const Options& opt) {
     std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
                 m.scored_queries, m.true_positives, m.false_positives);
     const mild::Decision half = mild::decideAt(*truth, mild::loadCandidates(opt.output), 0.5, opt.min_gap);
-    std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision, half.recall,
-                half.right, half.wrong);
+    std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision,
+                half.recall, half.right, half.wrong);
     if (!opt.plots.empty()) {
       mild::tools::writeOfflinePlots(opt.plots, *truth, mild::loadCandidates(opt.output), m, n, opt.min_gap);
     }
@@ -192,8 +199,10 @@ int main(int argc, char** argv) {
   app.add_option("--details", opt.details,
                  "CSV of every candidate with probability, similarity, matches, inliers and the verdict");
   app.add_option("--similarity", opt.similarity, "write the raw similarity matrix (frames x frames, float32 .npy)");
-  app.add_option("--fps", opt.fps, "frame rate for time stamps when the sequence has no times.txt")->check(CLI::PositiveNumber);
-  app.add_option("--min-gap", opt.min_gap, "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
+  app.add_option("--fps", opt.fps, "frame rate for time stamps when the sequence has no times.txt")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--min-gap", opt.min_gap,
+                 "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--print-config", opt.print_config, "print the effective parameters");
   return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });

@@ -6,8 +6,8 @@
 
 #include <CLI/CLI.hpp>
 
-#include "common/tool_main.hpp"
 #include <nlohmann/json.hpp>
+#include "common/tool_main.hpp"
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/offline/evaluation.hpp"

@@ -13,7 +13,8 @@ namespace fs = std::filesystem;
 namespace mild::tools {
 
 std::string findScript(const std::string& name) {
-  const std::vector<fs::path> places = {fs::path(MILD_SOURCE_SCRIPTS_DIR) / name, fs::path(MILD_INSTALL_SCRIPTS_DIR) / name};
+  const std::vector<fs::path> places = {fs::path(MILD_SOURCE_SCRIPTS_DIR) / name,
+                                        fs::path(MILD_INSTALL_SCRIPTS_DIR) / name};
   for (const auto& p : places) {
     if (fs::exists(p)) return p.string();
   }
@@ -37,15 +38,20 @@ void writeOfflinePlots(const std::string& dir, const GroundTruth& truth, const s
   for (const auto& [i, j] : truth.dont_care) data["dont_care"].push_back({i, j});
   for (const auto& c : bestPerQuery(candidates, min_gap)) data["detections"].push_back({c.query, c.candidate, c.score});
   const Reliability rel = reliability(truth, candidates, 10, min_gap);
-  for (const auto& b : rel.bins) data["reliability"].push_back({b.lower, b.upper, b.count, b.mean_score, b.fraction_right});
+  for (const auto& b : rel.bins)
+    data["reliability"].push_back({b.lower, b.upper, b.count, b.mean_score, b.fraction_right});
   data["expected_calibration_error"] = rel.expected_calibration_error;
   const Decision half = decideAt(truth, candidates, 0.5, min_gap);
-  data["decision"] = {{"threshold", half.threshold}, {"precision", half.precision}, {"recall", half.recall},
-                      {"right", half.right}, {"wrong", half.wrong}};
+  data["decision"] = {{"threshold", half.threshold},
+                      {"precision", half.precision},
+                      {"recall", half.recall},
+                      {"right", half.right},
+                      {"wrong", half.wrong}};
   const fs::path json_path = fs::path(dir) / "plot_data.json";
   std::ofstream(json_path) << data.dump();
 
-  const std::string command = "/usr/bin/python3 '" + findScript("plot_offline.py") + "' '" + json_path.string() + "' '" + dir + "'";
+  const std::string command =
+      "/usr/bin/python3 '" + findScript("plot_offline.py") + "' '" + json_path.string() + "' '" + dir + "'";
   if (std::system(command.c_str()) != 0) throw InvalidInput("plotting failed: " + command);
 }
 

@@ -32,7 +32,8 @@ inline std::string lastLine(const std::string& output) {
   size_t end = output.find_last_not_of('\n');
   if (end == std::string::npos) return "";
   const size_t start = output.rfind('\n', end);
-  return output.substr(start == std::string::npos ? 0 : start + 1, end - (start == std::string::npos ? 0 : start + 1) + 1);
+  return output.substr(start == std::string::npos ? 0 : start + 1,
+                       end - (start == std::string::npos ? 0 : start + 1) + 1);
 }
 
 }  // namespace mild::test

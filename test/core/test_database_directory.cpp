@@ -8,8 +8,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 
 namespace fs = std::filesystem;
 

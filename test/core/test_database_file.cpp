@@ -9,15 +9,15 @@
 #include <fstream>
 #include <random>
 
+#include <zlib.h>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <zlib.h>
 
 #include <cstring>
 
-#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/io/database_file.hpp"
 
 namespace fs = std::filesystem;
 
@@ -191,7 +191,8 @@ TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
     readDetectorFile(path("v3.mild"));
     FAIL() << "read a version-3 file";
   } catch (const InvalidInput& e) {
-    EXPECT_NE(std::string(e.what()).find("format version 3; this mild_lcd reads versions 1 to 2"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("format version 3; this mild_lcd reads versions 1 to 2"), std::string::npos)
+        << e.what();
   }
 }
 

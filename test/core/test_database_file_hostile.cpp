@@ -21,9 +21,9 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/io/database_file.hpp"
 #include "random_descriptors.hpp"
 
 namespace fs = std::filesystem;
@@ -215,7 +215,8 @@ TEST_F(HostileFiles, ConcurrentSavesToOnePathNeverCorruptEachOther) {
 TEST_F(HostileFiles, TemporaryFilesOfKilledSavesAreRemovedByTheNextSave) {
   auto detector = detectorWith(3);
   const std::string target = path("map.mild");
-  const std::string stale = target + ".tmp.0badf00d", fresh = target + ".tmp.0000beef", locked = target + ".tmp.000c0ffe";
+  const std::string stale = target + ".tmp.0badf00d", fresh = target + ".tmp.0000beef",
+                    locked = target + ".tmp.000c0ffe";
   for (const auto& f : {stale, fresh, locked}) std::ofstream(f) << "half a database";
   age(stale, 3600);
   age(locked, 3600);

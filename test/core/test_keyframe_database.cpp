@@ -128,7 +128,8 @@ TEST(KeyframeDatabase, ExactModeEqualsBruteForceOverAllFeatures) {
   const Scene s = makeScene(rng);
   for (const auto& kf : s.keyframes) db.insert(kf);
   const QueryResult exact = db.query(s.query, kAllKeyframes, SearchMode::kExact);
-  expectNear(exact.similarity, referenceSimilarity(db, s.query, db.size(), [](const Descriptor&, FeatureId) { return true; }));
+  expectNear(exact.similarity,
+             referenceSimilarity(db, s.query, db.size(), [](const Descriptor&, FeatureId) { return true; }));
   EXPECT_EQ(exact.stats.full_distances, s.query.size() * db.featureCount());
   // The index approximates: it can only miss votes, and on this scene it does.
   const QueryResult approx = db.query(s.query);
@@ -339,7 +340,8 @@ TEST(NearPast, KeyframesStillSharingTheViewUpToTheLimitAreLeftOut) {
   EXPECT_EQ(r.similarity.size(), 255u);
   const QueryResult without = v.db.query(v.query, 280);
   EXPECT_EQ(without.near_past, 0u);
-  EXPECT_EQ(std::max_element(without.similarity.begin(), without.similarity.end()) - without.similarity.begin() >= 255, true)
+  EXPECT_EQ(std::max_element(without.similarity.begin(), without.similarity.end()) - without.similarity.begin() >= 255,
+            true)
       << "without the rule, the near past is the best match";
 }
 

@@ -9,8 +9,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 
 namespace fs = std::filesystem;
 

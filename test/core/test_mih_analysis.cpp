@@ -5,11 +5,11 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "mild_lcd/offline/distance_priors.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/index/mih_index.hpp"
+#include "mild_lcd/offline/distance_priors.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/mih_analysis.hpp"
-#include "mild_lcd/index/mih_index.hpp"
 #include "random_descriptors.hpp"
 
 namespace mild {
@@ -96,7 +96,7 @@ TEST(MihAnalysis, RejectsArgumentsOutsideTheModel) {
 }
 
 TEST(MihAnalysis, FixedCostAndProbesFollowTheSubstringLengths) {
-  EXPECT_DOUBLE_EQ(fixedCost(16), 16.0 * 65536.0);  // m 2^(L/m)
+  EXPECT_DOUBLE_EQ(fixedCost(16), 16.0 * 65536.0);              // m 2^(L/m)
   EXPECT_DOUBLE_EQ(fixedCost(15), 262144.0 + 14.0 * 131072.0);  // 256 bits = one 18-bit + fourteen 17-bit substrings
   const MihCost c = analyse(1, 16, paperInlierPrior(), paperOutlierPrior(), BitModel::kExact);
   EXPECT_DOUBLE_EQ(c.probes, 16.0 * 17.0);  // each 16-bit key and its 16 one-bit neighbours
@@ -207,7 +207,8 @@ TEST(MihAnalysis, PredictsTheInlierFractionTheIndexFindsOnRealImages) {
     const double predicted = analyse(r, m, inliers, paperOutlierPrior(), BitModel::kExact).accuracy;
     // Real ORB bits are neither equally likely to flip nor independent, which the model assumes;
     // on the bench the model is within 0.02 of the index. 0.04 leaves room for other cameras.
-    EXPECT_NEAR(fraction, predicted, 0.04) << "m=" << m << " r=" << r << " (" << measured.inlier_descriptors.size() << " inlier pairs)";
+    EXPECT_NEAR(fraction, predicted, 0.04)
+        << "m=" << m << " r=" << r << " (" << measured.inlier_descriptors.size() << " inlier pairs)";
     RecordProperty("m" + std::to_string(m) + "_r" + std::to_string(r),
                    std::to_string(fraction) + " found, " + std::to_string(predicted) + " predicted");
   }

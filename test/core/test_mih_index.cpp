@@ -29,8 +29,8 @@ std::set<FeatureId> visited(const MihIndex& index, const Descriptor& q, FeatureI
 // r of them whenever d < m (r + 1), so the pair must meet in some table.
 TEST(MihIndex, FindsEveryFeatureWithinPigeonholeDistance) {
   std::mt19937_64 rng(42);
-  const std::vector<std::pair<int, int>> settings = {{16, 0}, {8, 0}, {32, 0}, {15, 0}, {24, 0},
-                                                     {16, 1}, {10, 1}, {8, 2}, {12, 2}, {16, 3}};
+  const std::vector<std::pair<int, int>> settings = {{16, 0}, {8, 0},  {32, 0}, {15, 0}, {24, 0},
+                                                     {16, 1}, {10, 1}, {8, 2},  {12, 2}, {16, 3}};
   for (auto [m, r] : settings) {
     MihIndex index(uncapped(m, r));
     const int guaranteed = m * (r + 1);
@@ -38,7 +38,8 @@ TEST(MihIndex, FindsEveryFeatureWithinPigeonholeDistance) {
     const Descriptor base = test::randomDescriptor(rng);
     // Features at every distance from the query, plus unrelated ones; one keyframe each so that the
     // intra-image rule cannot hide any of them.
-    for (int d = 0; d < guaranteed + 40 && d <= kDescriptorBits; ++d) stored.push_back(test::flipRandomBits(base, d, rng));
+    for (int d = 0; d < guaranteed + 40 && d <= kDescriptorBits; ++d)
+      stored.push_back(test::flipRandomBits(base, d, rng));
     for (int i = 0; i < 200; ++i) stored.push_back(test::randomDescriptor(rng));
     for (size_t i = 0; i < stored.size(); ++i) index.insertKeyframe(&stored[i], 1, static_cast<FeatureId>(i));
 

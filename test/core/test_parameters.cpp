@@ -54,23 +54,23 @@ void expectRejected(const std::string& yaml, const std::string& mention) {
 }
 
 TEST(Parameters, RejectsBadValuesNamingTheParameter) {
-  expectRejected("orb: {num_featurs: 500}", "orb/num_featurs");               // typo
-  expectRejected("orb: {num_features: many}", "orb/num_features");            // wrong type
-  expectRejected("orb: {num_features: 0}", "orb/num_features");               // out of range
+  expectRejected("orb: {num_featurs: 500}", "orb/num_featurs");     // typo
+  expectRejected("orb: {num_features: many}", "orb/num_features");  // wrong type
+  expectRejected("orb: {num_features: 0}", "orb/num_features");     // out of range
   expectRejected("index: {radius: 7}", "index/radius");
   expectRejected("index: {num_tables: 3}", "index/num_tables");
   expectRejected("similarity: {sigma2: 0}", "similarity/sigma2");
   expectRejected("verification: {num_tables: 8}", "verification/num_tables");
-  expectRejected("index: {min_bucket_cap: -3}", "index/min_bucket_cap");       // unsigned
+  expectRejected("index: {min_bucket_cap: -3}", "index/min_bucket_cap");  // unsigned
   expectRejected("similarity: {search: fast}", "similarity/search");
   expectRejected("filter: {loop_onset: 2}", "filter/loop_onset");
-  expectRejected("filter: {motion_kernel: 3}", "filter/motion_kernel");       // not a list
+  expectRejected("filter: {motion_kernel: 3}", "filter/motion_kernel");  // not a list
   expectRejected("filter: {motion_kernel: [a, b]}", "filter/motion_kernel");
   expectRejected("detector: {max_candidates: 0}", "detector/max_candidates");
   expectRejected("detector: {min_probability: 1.5}", "detector/min_probability");
   expectRejected("index: {cap_buckets: maybe}", "index/cap_buckets");
   expectRejected("orb: [1, 2]", "orb");
-  expectRejected("orb: {num_features: [1, 2]", "test.yaml");                   // not YAML
+  expectRejected("orb: {num_features: [1, 2]", "test.yaml");  // not YAML
   expectRejected("- 1\n- 2\n", "top level");
 }
 

@@ -13,7 +13,8 @@
 namespace mild {
 namespace {
 
-std::vector<FeatureMatch> bruteForceNearest(const DescriptorList& query, const DescriptorList& train, int max_distance) {
+std::vector<FeatureMatch> bruteForceNearest(const DescriptorList& query, const DescriptorList& train,
+                                            int max_distance) {
   std::vector<FeatureMatch> out;
   for (size_t q = 0; q < query.size(); ++q) {
     int best = -1, best_d = 1000;
@@ -163,10 +164,11 @@ Features fixtureFeatures(int frame) {
 
 TEST(GeometricVerifier, AcceptsATrueLoopPairAndRejectsUnrelatedViews) {
   const Features loop_query = fixtureFeatures(56), loop_match = fixtureFeatures(5);  // ground truth overlap 1.0
-  const Features elsewhere = fixtureFeatures(30);                                     // not listed: overlap < 0.2
+  const Features elsewhere = fixtureFeatures(30);                                    // not listed: overlap < 0.2
   GeometricVerifier fundamental{VerificationParams{}};
   const GeometricCheck loop = fundamental.check(loop_query, loop_match);
-  EXPECT_TRUE(loop.verification.verified) << "inliers " << loop.verification.inliers << " of " << loop.verification.matches;
+  EXPECT_TRUE(loop.verification.verified)
+      << "inliers " << loop.verification.inliers << " of " << loop.verification.matches;
   EXPECT_EQ(loop.model.rows, 3);
   EXPECT_EQ(loop.inlier_mask.size(), loop.matches.size());
   const Verification unrelated = fundamental.verify(loop_query, elsewhere);

@@ -5,8 +5,8 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/io/database_file.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static const mild::DetectorParams params = [] {

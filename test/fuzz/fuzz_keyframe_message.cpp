@@ -49,8 +49,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       detector().process(f, msg.header.stamp.toSec(), id);
     } else {
       sensor_msgs::Image msg;
-      msg.encoding = in.PickValueInArray<std::string>({"mono8", "bgr8", "rgb8", "bgra8", "rgba8", "mono16", "16UC1",
-                                                       "32FC1", "8UC1", "yuv422", ""});
+      msg.encoding = in.PickValueInArray<std::string>(
+          {"mono8", "bgr8", "rgb8", "bgra8", "rgba8", "mono16", "16UC1", "32FC1", "8UC1", "yuv422", ""});
       msg.width = in.ConsumeIntegralInRange<uint32_t>(0, 96);
       msg.height = in.ConsumeIntegralInRange<uint32_t>(0, 96);
       msg.step = in.ConsumeIntegralInRange<uint32_t>(0, 400);

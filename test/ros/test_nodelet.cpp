@@ -14,21 +14,21 @@
 
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
-#include <opencv2/imgcodecs.hpp>
+#include <nodelet/NodeletList.h>
 #include <ros/ros.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
-#include <nodelet/NodeletList.h>
 #include <std_srvs/Trigger.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include <atomic>
 #include <thread>
 
+#include "../common/run_command.hpp"
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SparseMatch.h"
 #include "mild_lcd/offline/evaluation.hpp"
-#include "../common/run_command.hpp"
 #include "ros_test_support.hpp"
 
 namespace mild_lcd::test {
@@ -418,8 +418,8 @@ TEST(Interface, RosmsgAndRossrvShowThePackagesDefinitions) {
   }
   const auto list = mild::test::runCommand("rosmsg package mild_lcd && rossrv package mild_lcd");
   ASSERT_EQ(list.status, 0) << list.output;
-  for (const char* type : {"mild_lcd/Keyframe", "mild_lcd/LoopCandidate", "mild_lcd/SparseMatch", "mild_lcd/SaveDatabase",
-                           "mild_lcd/LoadDatabase"}) {
+  for (const char* type : {"mild_lcd/Keyframe", "mild_lcd/LoopCandidate", "mild_lcd/SparseMatch",
+                           "mild_lcd/SaveDatabase", "mild_lcd/LoadDatabase"}) {
     EXPECT_NE(list.output.find(type), std::string::npos) << type << " in\n" << list.output;
   }
   const auto services = mild::test::runCommand("rosservice list");
@@ -448,8 +448,8 @@ TEST(StartUp, InvalidParameterIsRejectedNamingIt) {
   EXPECT_NE(node_typo.status, 0) << node_typo.output;
   EXPECT_NE(node_typo.status, 124) << node_typo.output;
   EXPECT_NE(node_typo.output.find("queue_sise"), std::string::npos) << node_typo.output;
-  const auto string_bool =
-      mild::test::runCommand(node + " __name:=str_lcd __ns:=/str _save_on_shutdown:='\"true\"' _database_path:=/tmp/x.db");
+  const auto string_bool = mild::test::runCommand(
+      node + " __name:=str_lcd __ns:=/str _save_on_shutdown:='\"true\"' _database_path:=/tmp/x.db");
   EXPECT_NE(string_bool.status, 0) << string_bool.output;
   EXPECT_NE(string_bool.status, 124) << string_bool.output;
   EXPECT_NE(string_bool.output.find("save_on_shutdown"), std::string::npos) << string_bool.output;
@@ -467,7 +467,8 @@ TEST(StartUpFailure, ABogusTransportLeavesTheManagerAlive) {
   ASSERT_TRUE(ros::service::call("/manager/list", list)) << "the manager died";
   for (const auto& name : list.response.nodelets) EXPECT_EQ(name.find("bogus"), std::string::npos) << name;
   const std::string loaded = privateParam("good_nodelet");
-  EXPECT_NE(std::find(list.response.nodelets.begin(), list.response.nodelets.end(), loaded), list.response.nodelets.end())
+  EXPECT_NE(std::find(list.response.nodelets.begin(), list.response.nodelets.end(), loaded),
+            list.response.nodelets.end())
       << "the good nodelet in the same manager keeps running";
 }
 
@@ -512,12 +513,13 @@ TEST(ServiceLoad, KeyframesArriveWhileSparseMatchIsBusyAndEveryOneIsCounted) {
   const int answered = static_cast<int>(outputs.size());
   const int dropped = std::stoi(diagnosticValue("dropped keyframes", "(latest)", 2.0));
   const int rejected = std::stoi(diagnosticValue("rejected keyframes", "(latest)", 2.0));
-  EXPECT_EQ(answered + dropped + rejected, kKeyframes) << answered << " answered, " << dropped << " dropped, " << rejected
-                                                       << " rejected";
+  EXPECT_EQ(answered + dropped + rejected, kKeyframes)
+      << answered << " answered, " << dropped << " dropped, " << rejected << " rejected";
   EXPECT_EQ(answered, kKeyframes) << "the queue (300) holds them all: none needs dropping";
 
   mild_lcd::SparseMatch::Request huge = big;  // over ~max_match_features (10,000)
-  huge.query_descriptors.insert(huge.query_descriptors.end(), big.query_descriptors.begin(), big.query_descriptors.end());
+  huge.query_descriptors.insert(huge.query_descriptors.end(), big.query_descriptors.begin(),
+                                big.query_descriptors.end());
   const auto refused = callSparseMatch(huge);
   EXPECT_FALSE(refused.success);
   EXPECT_NE(refused.message.find("max_match_features"), std::string::npos) << refused.message;

@@ -15,10 +15,10 @@
 #include <set>
 
 #include <cv_bridge/cv_bridge.h>
-#include <opencv2/imgcodecs.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
 #include <std_srvs/Trigger.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "../common/run_command.hpp"
 #include "mild_lcd/Keyframe.h"
@@ -65,8 +65,9 @@ std::vector<mild_lcd::LoopClosure> feed(size_t first, size_t last) {
   for (size_t i = first; i < last; ++i) {
     std_msgs::Header header;
     header.stamp = ros::Time(1000.0 + 0.5 * i);
-    images.publish(cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, cv::imread(files[i], cv::IMREAD_GRAYSCALE))
-                       .toImageMsg());
+    images.publish(
+        cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, cv::imread(files[i], cv::IMREAD_GRAYSCALE))
+            .toImageMsg());
     ros::WallDuration(0.05).sleep();  // well within the queue; keeps the test's own send queue short
   }
   EXPECT_TRUE(outputs.waitForCount(last - first, 60.0));
@@ -213,8 +214,8 @@ TEST(Persistence, AMapThatFailsToLoadAtStartUpIsNeverOverwritten) {
     const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     dup2(fd, 1);
     dup2(fd, 2);
-    execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/broken_map", "__name:=mild_lcd", path_arg.c_str(), "_load_on_start:=true",
-          "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/broken_map", "__name:=mild_lcd", path_arg.c_str(),
+          "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
     _exit(127);
   }
   ASSERT_GT(pid, 0);

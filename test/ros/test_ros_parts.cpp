@@ -9,12 +9,12 @@
 #include <filesystem>
 #include <fstream>
 
+#include <sensor_msgs/image_encodings.h>
 #include <boost/make_shared.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <sensor_msgs/image_encodings.h>
 
-#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
@@ -46,7 +46,8 @@ TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
       << "a string where a boolean belongs";
   EXPECT_NE(errorOf([] { settingsFrom("queue_size: 2.5\n"); }).find("queue_size"), std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("queue_size: 0\n"); }).find("queue_size"), std::string::npos);
-  const std::string typo = errorOf([] { rejectUnknownParameters(YamlParameterSource::fromString("queue_sise: 10\n")); });
+  const std::string typo =
+      errorOf([] { rejectUnknownParameters(YamlParameterSource::fromString("queue_sise: 10\n")); });
   EXPECT_NE(typo.find("~queue_sise"), std::string::npos) << typo;
   EXPECT_NE(typo.find("queue_size"), std::string::npos) << "lists the real names: " << typo;
   EXPECT_EQ(errorOf([] {
@@ -55,10 +56,19 @@ TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
             }),
             "")
       << "the node's, the detector's and diagnostic_updater's names are known";
-  EXPECT_NE(errorOf([] { settingsFrom("use_image_input: false\nuse_keyframe_input: false\n"); }).find("nothing to listen"),
-            std::string::npos);
+  EXPECT_NE(
+      errorOf([] { settingsFrom("use_image_input: false\nuse_keyframe_input: false\n"); }).find("nothing to listen"),
+      std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("load_on_start: true\n"); }).find("database_path"), std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("database_dir: maps\n"); }).find("absolute"), std::string::npos);
+}
+
+TEST(NodeSettings, TheReadmeTableIsTheDeclaration) {
+  std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
+  const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(readme.find(nodeSettingsMarkdown()), std::string::npos)
+      << "README.md's node parameter table is out of date; it must read exactly:\n"
+      << nodeSettingsMarkdown();
 }
 
 TEST(NodeSettings, TheDatabaseFolderDefaultsToThePathsFolderOrRosHome) {
@@ -110,7 +120,8 @@ TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
   const auto size = fs::file_size(dir_ / "map.db");
   ASSERT_GT(size, 1u << 20);
 
-  DatabaseStore store(settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\nmax_database_mb: 1\n"));
+  DatabaseStore store(
+      settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\nmax_database_mb: 1\n"));
   SharedDetector running;
   running.detector = detector(0);
   const std::string error = errorOf([&] { store.loadOnStart(running); });
@@ -137,7 +148,8 @@ TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {
   SharedDetector shared;
   shared.detector = detector(4);
   std::ofstream(dir_.parent_path() / "victim.txt") << "precious";
-  for (const std::string& bad : {std::string("../victim.txt"), (dir_.parent_path() / "victim.txt").string(), std::string("")}) {
+  for (const std::string& bad :
+       {std::string("../victim.txt"), (dir_.parent_path() / "victim.txt").string(), std::string("")}) {
     EXPECT_THROW(store.save(shared, bad), mild::InvalidInput) << bad;
   }
   EXPECT_EQ(store.save(shared, "robot/one.db"), "saved 4 keyframes to " + (dir_ / "robot/one.db").string());
@@ -178,9 +190,9 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
   KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
   worker.start();
   worker.push({image(200, 150, 1.0), nullptr, nullptr});
-  worker.push({image(1, 1, 2.0), nullptr, nullptr});    // thinner than ORB's border: stored, no features
+  worker.push({image(1, 1, 2.0), nullptr, nullptr});           // thinner than ORB's border: stored, no features
   worker.push({image(8, 8, 3.0, "32FC1"), nullptr, nullptr});  // unusable encoding
-  worker.push({image(2000, 1000, 4.0), nullptr, nullptr});  // over max_image_pixels
+  worker.push({image(2000, 1000, 4.0), nullptr, nullptr});     // over max_image_pixels
   worker.waitIdle();
   const WorkerCounters c = worker.counters();
   EXPECT_EQ(c.processed, 2u) << "the thin image is a keyframe, answered";
@@ -211,7 +223,8 @@ TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
 
 TEST(DebugImages, TheCacheIsBoundedInBytes) {
   DebugImageCache cache(1000, 4u << 20);
-  for (uint64_t id = 0; id < 20; ++id) cache.remember(id, cv::Mat(2000, 2000, CV_8UC1, cv::Scalar(1)), mild::PixelFormat::kGray);
+  for (uint64_t id = 0; id < 20; ++id)
+    cache.remember(id, cv::Mat(2000, 2000, CV_8UC1, cv::Scalar(1)), mild::PixelFormat::kGray);
   EXPECT_LE(cache.bytes(), 4u << 20);
   EXPECT_FALSE(cache.find(19).empty()) << "the newest stays";
   EXPECT_TRUE(cache.find(0).empty());

@@ -39,12 +39,37 @@ TEST(MildBenchScale, ReportsEveryColumnPerSize) {
       ASSERT_TRUE(row.contains(key)) << key << " in " << row.dump();
     }
     EXPECT_GT(row["bytes_per_feature"].get<double>(), 32.0) << "at least the descriptor";
+    // faiss answers the database's question on the same descriptors: pairs within d0, MIH a subset.
+    ASSERT_TRUE(row["faiss_mih_ms_median"].is_number()) << row.dump();
+    const auto exact_pairs = row["faiss_exact_pairs_first_query"].get<size_t>();
+    const auto mih_pairs = row["faiss_mih_pairs_first_query"].get<size_t>();
+    EXPECT_GT(exact_pairs, 0u) << "queries revisit stored frames, so features within d0 exist";
+    EXPECT_GT(mih_pairs, 0u);
+    EXPECT_LE(mih_pairs, exact_pairs) << "multi-index hashing finds a subset of the exact pairs";
   }
   EXPECT_EQ(out["persistence"]["keyframes"].get<int>(), 20);
   EXPECT_GT(out["persistence"]["load_s"].get<double>(), 0.0);
   const auto bad = mild::test::runCommand(std::string(MILD_BENCH_SCALE_BIN) + " --sizes 1k");
   EXPECT_EQ(bad.status, 2);
   EXPECT_NE(bad.output.find("--sizes"), std::string::npos) << bad.output;
+}
+
+TEST(MildBenchScale, BuildsTheDatabaseFromARealWalk) {
+  // The sample's 300 frames: 5 held out as queries, sizes as prefixes of the rest and the whole walk.
+  const auto run = mild::test::runCommand(std::string(MILD_BENCH_SCALE_BIN) + " --sequence " + kSample +
+                                          " --sizes 100,1000 --features 200 --queries 5 --brute-queries 1 "
+                                          "--skip-baseline --persistence-keyframes 0 --json");
+  ASSERT_EQ(run.status, 0) << run.output;
+  const json out = json::parse(mild::test::lastLine(run.output));
+  EXPECT_EQ(out["keyframes_from"], "sequence");
+  EXPECT_EQ(out["queries"].get<int>(), 5);
+  ASSERT_EQ(out["rows"].size(), 2u) << "1000 is beyond the walk: 100 and the whole walk remain";
+  EXPECT_EQ(out["rows"][0]["keyframes"].get<int>(), 100);
+  EXPECT_EQ(out["rows"][1]["keyframes"].get<int>(), 295);
+  const auto too_many = mild::test::runCommand(std::string(MILD_BENCH_SCALE_BIN) + " --sequence " + kSample +
+                                               " --queries 400 --persistence-keyframes 0");
+  EXPECT_EQ(too_many.status, 2) << too_many.output;
+  EXPECT_NE(too_many.output.find("readable frames"), std::string::npos) << too_many.output;
 }
 
 }  // namespace

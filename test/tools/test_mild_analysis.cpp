@@ -45,7 +45,8 @@ TEST(MildAnalysis, RecommendsOneTableCountPerRadius) {
 }
 
 TEST(MildAnalysis, DrawsThePlot) {
-  const std::filesystem::path png = std::filesystem::temp_directory_path() / ("mild_analysis_" + std::to_string(::getpid()) + ".png");
+  const std::filesystem::path png =
+      std::filesystem::temp_directory_path() / ("mild_analysis_" + std::to_string(::getpid()) + ".png");
   const auto run = mildAnalysis("--model exact --m-range 4:24 --r-range 0:2 --plot " + png.string());
   ASSERT_EQ(run.status, 0) << run.output;
   ASSERT_TRUE(std::filesystem::exists(png));
@@ -69,9 +70,10 @@ TEST(MildAnalysis, BadArgumentsAreClearErrors) {
 }
 
 TEST(MildAnalysis, MeasuresPriorsOnASequenceWithGroundTruth) {
-  const std::filesystem::path out = std::filesystem::temp_directory_path() / ("priors_" + std::to_string(::getpid()) + ".json");
-  const auto run = mildAnalysis("--measure-priors " + std::string(MILD_SOURCE_DIR) + "/sample/corridor --pairs 40 --output " +
-                                out.string() + " --json");
+  const std::filesystem::path out =
+      std::filesystem::temp_directory_path() / ("priors_" + std::to_string(::getpid()) + ".json");
+  const auto run = mildAnalysis("--measure-priors " + std::string(MILD_SOURCE_DIR) +
+                                "/sample/corridor --pairs 40 --output " + out.string() + " --json");
   ASSERT_EQ(run.status, 0) << run.output;
   const json summary = json::parse(mild::test::lastLine(run.output));
   EXPECT_NEAR(summary["inlier_mean"].get<double>(), 34.0, 6.0);

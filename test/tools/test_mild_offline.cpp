@@ -20,7 +20,9 @@ const std::string kFixtureConfig = std::string(MILD_SOURCE_DIR) + "/test/data/co
 
 using ProcessResult = mild::test::CommandResult;
 
-ProcessResult mildOffline(const std::string& args) { return mild::test::runCommand(std::string(MILD_OFFLINE_BIN) + " " + args); }
+ProcessResult mildOffline(const std::string& args) {
+  return mild::test::runCommand(std::string(MILD_OFFLINE_BIN) + " " + args);
+}
 
 class MildOffline : public ::testing::Test {
  protected:
@@ -43,9 +45,9 @@ std::string readFile(const std::string& path) {
 }
 
 TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
-  const ProcessResult run = mildOffline("--images " + kFixture + " --config " + kFixtureConfig + " --output " + path("c.csv") +
-                              " --gt " + kFixture + "/gt_loops.txt --min-gap 8 --stats " + path("s.json") + " --plots " +
-                              path("plots"));
+  const ProcessResult run =
+      mildOffline("--images " + kFixture + " --config " + kFixtureConfig + " --output " + path("c.csv") + " --gt " +
+                  kFixture + "/gt_loops.txt --min-gap 8 --stats " + path("s.json") + " --plots " + path("plots"));
   ASSERT_EQ(run.status, 0) << run.output;
   EXPECT_NE(run.output.find("recall@100%P: "), std::string::npos) << run.output;
   EXPECT_NE(run.output.find("average precision: "), std::string::npos);
@@ -87,8 +89,8 @@ TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {
   std::ofstream(path("notes.txt")) << "ignored";
   // Twelve frames are too few for the near-past band's background: without it, candidates show the numbering.
   std::ofstream(path("config.yaml")) << "detector:\n  exclusion_frames: 8\n  near_past: false\n";
-  const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv") +
-                              " --config " + path("config.yaml"));
+  const ProcessResult run =
+      mildOffline("--images " + dir_.string() + " --output " + path("c.csv") + " --config " + path("config.yaml"));
   ASSERT_EQ(run.status, 0) << run.output;
   EXPECT_NE(run.output.find("frame 5"), std::string::npos) << run.output;
   EXPECT_NE(run.output.find("000005.jpg"), std::string::npos) << run.output;
@@ -124,7 +126,8 @@ TEST_F(MildOffline, AllFramesUnreadableIsAClearError) {
 
 TEST_F(MildOffline, MalformedGroundTruthFailsBeforeProcessing) {
   std::ofstream(path("gt.txt")) << "12 3 0.5 1\n12 three 0.5 1\n";
-  const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --gt " + path("gt.txt"));
+  const ProcessResult run =
+      mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --gt " + path("gt.txt"));
   EXPECT_NE(run.status, 0);
   EXPECT_NE(run.output.find(path("gt.txt") + ":2"), std::string::npos) << run.output;
   EXPECT_EQ(run.output.find("processed"), std::string::npos) << "should fail before the run";
@@ -141,14 +144,16 @@ TEST_F(MildOffline, GroundTruthThatCannotBeThisSequencesIsBadInput) {
 }
 
 TEST_F(MildOffline, AConfigThatIsAFolderIsBadInput) {
-  const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + dir_.string());
+  const ProcessResult run =
+      mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + dir_.string());
   EXPECT_EQ(run.status, 2) << run.output;
   EXPECT_NE(run.output.find("not a parameter file"), std::string::npos) << run.output;
 }
 
 TEST_F(MildOffline, BadConfigNamesTheParameter) {
   std::ofstream(path("bad.yaml")) << "filter:\n  no_loop_likelyhood: 3\n";
-  const ProcessResult run = mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + path("bad.yaml"));
+  const ProcessResult run =
+      mildOffline("--images " + kFixture + " --output " + path("c.csv") + " --config " + path("bad.yaml"));
   EXPECT_NE(run.status, 0);
   EXPECT_NE(run.output.find("filter/no_loop_likelyhood"), std::string::npos) << run.output;
 }

@@ -9,12 +9,12 @@
 
 #include <opencv2/core.hpp>
 
-#include "mild_lcd/verification/candidate_verifier.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
-#include "mild_lcd/verification/geometric_verifier.hpp"
-#include "mild_lcd/place/keyframe_database.hpp"
 #include "mild_lcd/detector/candidate_scorer.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
 #include "mild_lcd/filter/temporal_filter.hpp"
+#include "mild_lcd/place/keyframe_database.hpp"
+#include "mild_lcd/verification/candidate_verifier.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
 
 namespace mild {
 
@@ -51,8 +51,8 @@ struct DetectorParams {
 };
 
 struct LoopCandidate {
-  uint64_t id = 0;            // the candidate keyframe's id
-  KeyframeIndex index = 0;    // its position in the database
+  uint64_t id = 0;          // the candidate keyframe's id
+  KeyframeIndex index = 0;  // its position in the database
   double stamp = 0.0;
   double probability = 0.0;         // calibrated loop probability (CandidateScorer)
   double filter_probability = 0.0;  // the temporal filter's probability, one of its inputs
@@ -93,10 +93,10 @@ struct DetectorState {
   std::string parameters;  // "name: value" lines of the detector that saved it (describeParameters)
   uint64_t next_id = 0;
   KeyframeIndex session_start = 0;
-  std::vector<KeyframeRecord> records;     // in database order
-  std::vector<DescriptorList> descriptors; // one list per record, one descriptor per keypoint
-  std::string filter_name;                 // TemporalFilter::name() of the filter that saved it
-  std::vector<uint8_t> filter_state;       // its saveState()
+  std::vector<KeyframeRecord> records;      // in database order
+  std::vector<DescriptorList> descriptors;  // one list per record, one descriptor per keypoint
+  std::string filter_name;                  // TemporalFilter::name() of the filter that saved it
+  std::vector<uint8_t> filter_state;        // its saveState()
 };
 
 // A state checked and turned into a ready database and filter, waiting to replace a detector's.

@@ -5,9 +5,9 @@
 #include <unordered_map>
 #include <vector>
 
+#include "mild_lcd/common/types.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/substring_layout.hpp"
-#include "mild_lcd/common/types.hpp"
 
 namespace mild {
 

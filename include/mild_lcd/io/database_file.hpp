@@ -3,8 +3,8 @@
 #include <cstdint>
 #include <string>
 
-#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 
 namespace mild {
 

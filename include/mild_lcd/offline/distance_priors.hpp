@@ -5,8 +5,8 @@
 #include <vector>
 
 #include "mild_lcd/features/feature_extractor.hpp"
-#include "mild_lcd/offline/mih_analysis.hpp"
 #include "mild_lcd/index/mih_index.hpp"
+#include "mild_lcd/offline/mih_analysis.hpp"
 
 namespace mild {
 
@@ -42,7 +42,8 @@ struct MeasuredPriors {
 };
 
 // Throws InvalidInput when a view's keypoints and descriptors differ in number.
-MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping, const std::vector<FeaturePair>& disjoint,
+MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping,
+                                     const std::vector<FeaturePair>& disjoint,
                                      const PriorMeasurementParams& params = {});
 
 // The fraction of correspondences (query, stored) that the real MihIndex with these parameters

@@ -69,7 +69,8 @@ struct Decision {
   double precision = 1.0;  // 1 when nothing is accepted
   double recall = 0.0;
 };
-Decision decideAt(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, double threshold, int min_gap = 40);
+Decision decideAt(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, double threshold,
+                  int min_gap = 40);
 
 // Reliability of the scores as probabilities, over each query's best candidate (don't-care
 // skipped): `bins` equal-width bins of the score in [0, 1], each with its count, mean score and
@@ -85,7 +86,8 @@ struct Reliability {
   double expected_calibration_error = 0.0;
   size_t scored = 0;
 };
-Reliability reliability(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, int bins = 10, int min_gap = 40);
+Reliability reliability(const GroundTruth& truth, const std::vector<ScoredPair>& candidates, int bins = 10,
+                        int min_gap = 40);
 
 // Scores as written to CSV: enough digits that ranking and ties survive the round trip.
 std::string formatScore(double score);

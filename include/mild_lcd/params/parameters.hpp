@@ -26,7 +26,8 @@ class ParameterSource {
 };
 
 // Calls visit(name, field) for every tunable of DetectorParams, fields being int, double, bool,
-// uint32_t, uint64_t, std::string, SearchMode or std::vector<double>. This list is the single definition of the parameter names.
+// uint32_t, uint64_t, std::string, SearchMode or std::vector<double>. This list is the single definition of the
+// parameter names.
 template <class Visit>
 void visitParameters(DetectorParams& p, Visit&& visit);
 

@@ -6,10 +6,10 @@
 
 #include <opencv2/core.hpp>
 
+#include "mild_lcd/common/types.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/mih_index.hpp"
 #include "mild_lcd/place/similarity.hpp"
-#include "mild_lcd/common/types.hpp"
 
 namespace mild {
 
@@ -122,8 +122,8 @@ class KeyframeDatabase {
   DatabaseParams params_;
   PhiTable phi_;
   MihIndex index_;
-  std::vector<uint64_t> heads_;  // first 64 bits of every feature
-  std::vector<Tail> tails_;      // remaining 192 bits
+  std::vector<uint64_t> heads_;              // first 64 bits of every feature
+  std::vector<Tail> tails_;                  // remaining 192 bits
   std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
 };
 

@@ -20,8 +20,8 @@ namespace mild {
 // document frequency log(N / N_f) silences features that are everywhere (inter-image burstiness);
 // dividing by the feature's total vote mass keeps one query feature from voting more than once.
 struct SimilarityParams {
-  int max_distance = 64;       // d0
-  double sigma2 = 900.0;       // sigma^2 in phi
+  int max_distance = 64;  // d0
+  double sigma2 = 900.0;  // sigma^2 in phi
   // The two halves of inter-image burstiness handling; both on is the paper's phi'.
   bool idf_weighting = true;       // the log(N / N_f) factor
   bool vote_normalization = true;  // the division by the feature's vote mass

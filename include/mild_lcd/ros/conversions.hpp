@@ -9,17 +9,17 @@
 #include <optional>
 #include <vector>
 
-#include <opencv2/core.hpp>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <std_msgs/Header.h>
+#include <opencv2/core.hpp>
 
 #include "mild_lcd/KeyPoint.h"
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SparseMatch.h"
-#include "mild_lcd/verification/geometric_verifier.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/verification/geometric_verifier.hpp"
 
 namespace mild_lcd {
 

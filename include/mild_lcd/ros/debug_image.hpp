@@ -11,8 +11,8 @@
 
 #include <opencv2/core.hpp>
 
-#include "mild_lcd/features/feature_extractor.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/features/feature_extractor.hpp"
 
 namespace mild_lcd {
 

@@ -36,9 +36,9 @@ struct ProcessedKeyframe {
   std_msgs::Header header;
   mild::DetectionResult result;
   size_t database_size = 0;
-  DecodedImage image;                            // empty for keyframe (feature) input
-  std::vector<cv::KeyPoint> query_keypoints;     // filled when `wants_keypoints` said so
-  std::vector<cv::KeyPoint> candidate_keypoints; // of the best candidate, likewise
+  DecodedImage image;                             // empty for keyframe (feature) input
+  std::vector<cv::KeyPoint> query_keypoints;      // filled when `wants_keypoints` said so
+  std::vector<cv::KeyPoint> candidate_keypoints;  // of the best candidate, likewise
 };
 
 struct WorkerCounters {
@@ -50,10 +50,10 @@ struct WorkerCounters {
 class KeyframeWorker {
  public:
   struct Hooks {
-    std::function<void()> startup;                                // runs first, on the worker thread
-    std::function<void(const ProcessedKeyframe&)> publish;        // after each keyframe, unlocked
-    std::function<bool()> wants_keypoints;                        // copy keypoints for the debug image?
-    std::function<void(const std::string&)> warn;                 // throttling is the caller's
+    std::function<void()> startup;                          // runs first, on the worker thread
+    std::function<void(const ProcessedKeyframe&)> publish;  // after each keyframe, unlocked
+    std::function<bool()> wants_keypoints;                  // copy keypoints for the debug image?
+    std::function<void(const std::string&)> warn;           // throttling is the caller's
   };
   KeyframeWorker(SharedDetector& shared, size_t queue_size, uint64_t max_image_pixels, Hooks hooks);
   ~KeyframeWorker();

@@ -16,15 +16,15 @@ struct NodeSettings {
   bool use_keyframe_input = true;
   std::string image_transport = "raw";
   int queue_size = 100;
-  int debug_image_cache = 1000;      // keyframes kept (half resolution, grey) for debug_image
-  int debug_image_cache_mb = 64;     // and at most this many megabytes of them
-  int max_image_pixels = 16777216;   // larger images are refused before decoding (4096 x 4096)
-  std::string database_dir;          // the only folder maps are saved to and loaded from
-  std::string database_path;         // inside database_dir (a name relative to it, or absolute)
+  int debug_image_cache = 1000;     // keyframes kept (half resolution, grey) for debug_image
+  int debug_image_cache_mb = 64;    // and at most this many megabytes of them
+  int max_image_pixels = 16777216;  // larger images are refused before decoding (4096 x 4096)
+  std::string database_dir;         // the only folder maps are saved to and loaded from
+  std::string database_path;        // inside database_dir (a name relative to it, or absolute)
   bool load_on_start = false;
   bool save_on_shutdown = false;
-  int max_database_mb = 16384;       // larger files are refused unread
-  int max_match_features = 10000;    // per side of a sparse_match request
+  int max_database_mb = 16384;     // larger files are refused unread
+  int max_match_features = 10000;  // per side of a sparse_match request
 
   // Reads every setting the source holds, type-checked, and validates them. `default_dir` is where
   // maps go when ~database_dir is not set and ~database_path is relative or empty (the node passes
@@ -40,6 +40,9 @@ struct SettingDoc {
   std::string doc;
 };
 const std::vector<SettingDoc>& nodeSettingDocs();
+// The same as a Markdown table (name, default, meaning): the README's, printed by
+// `mild_lcd_node --help-parameters`.
+std::string nodeSettingsMarkdown();
 
 // Throws mild::InvalidInput for the first private parameter that neither the node, the detector nor
 // a library the node uses (diagnostic_updater's diagnostic_period) reads: a misspelt name is an

@@ -11,11 +11,11 @@ namespace mild {
 struct Verification {
   bool attempted = false;
   bool verified = false;
-  int matches = 0;      // descriptor matches fed to the geometric model
-  int inliers = 0;      // matches consistent with it
+  int matches = 0;  // descriptor matches fed to the geometric model
+  int inliers = 0;  // matches consistent with it
   double inlier_ratio = 0.0;
-  double coverage = 0.0;          // inlierCoverage, the smaller of the two images' (inlier_layout.hpp)
-  double homography_share = 0.0;  // homographyShare of the inliers
+  double coverage = 0.0;                     // inlierCoverage, the smaller of the two images' (inlier_layout.hpp)
+  double homography_share = 0.0;             // homographyShare of the inliers
   std::vector<FeatureMatch> inlier_matches;  // the matches consistent with the model
 };
 

@@ -18,8 +18,8 @@ struct SparseMatchParams {
   // m. The seed paper uses 24; on 1,200-feature bench pairs 22 is 1.4x faster (29x brute force,
   // 12x FLANN LSH) and still recovers 97.7% of the brute-force pairs closer than 50 bits (24: 99.2%).
   int num_tables = 22;
-  int radius = 0;        // r, multi-probe radius (0..2)
-  int max_distance = 64; // matches farther than this (Hamming) are dropped
+  int radius = 0;         // r, multi-probe radius (0..2)
+  int max_distance = 64;  // matches farther than this (Hamming) are dropped
   // Lowe's ratio test: keep a match only if best < ratio * second best (0 = off).
   double ratio = 0.0;
   // Keep a match only if it is also the query's nearest neighbour seen from the train side.

@@ -19,9 +19,11 @@ double msSince(Clock::time_point start) {
 }  // namespace
 
 void CandidateParams::validate() const {
-  if (exclusion_frames < 0) throw InvalidInput("detector/exclusion_frames must be >= 0, got " + std::to_string(exclusion_frames));
+  if (exclusion_frames < 0)
+    throw InvalidInput("detector/exclusion_frames must be >= 0, got " + std::to_string(exclusion_frames));
   if (!(exclusion_seconds >= 0.0)) throw InvalidInput("detector/exclusion_seconds must be >= 0");
-  if (max_candidates < 1) throw InvalidInput("detector/max_candidates must be >= 1, got " + std::to_string(max_candidates));
+  if (max_candidates < 1)
+    throw InvalidInput("detector/max_candidates must be >= 1, got " + std::to_string(max_candidates));
   if (suppression_radius < 0) throw InvalidInput("detector/suppression_radius must be >= 0");
   if (!(near_past_kappa >= 0.0) || !std::isfinite(near_past_kappa)) {
     throw InvalidInput("detector/near_past_kappa must be >= 0, got " + std::to_string(near_past_kappa));
@@ -68,8 +70,9 @@ void LoopDetector::restore(DetectorState state, bool continue_session) {
 
 PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_session) const {
   const size_t n = state.records.size();
-  if (state.descriptors.size() != n) throw InvalidInput("state has " + std::to_string(n) + " keyframes but " +
-                                                       std::to_string(state.descriptors.size()) + " descriptor lists");
+  if (state.descriptors.size() != n)
+    throw InvalidInput("state has " + std::to_string(n) + " keyframes but " + std::to_string(state.descriptors.size()) +
+                       " descriptor lists");
   if (state.session_start > n) throw InvalidInput("state's session start lies beyond its keyframes");
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
   uint64_t largest_id = 0;
@@ -100,7 +103,10 @@ PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_
     filter->loadState(state.filter_state);
     if (filter->stateKeyframes() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
   }
-  return PreparedRestore{std::move(database), std::move(filter), std::move(state.records), std::move(index_of_id),
+  return PreparedRestore{std::move(database),
+                         std::move(filter),
+                         std::move(state.records),
+                         std::move(index_of_id),
                          state.next_id,
                          continue_session ? state.session_start : static_cast<KeyframeIndex>(n)};
 }
@@ -153,13 +159,15 @@ void LoopDetector::checkId(std::optional<uint64_t> id) const {
     if (*id > kMaxKeyframeId) {
       throw InvalidInput("keyframe id " + std::to_string(*id) + " is too large (ids must be below 2^64 - 1)");
     }
-    if (index_of_id_.count(*id)) throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
+    if (index_of_id_.count(*id))
+      throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
   } else if (next_id_ > kMaxKeyframeId) {
     throw CapacityError("no keyframe id left to assign (the largest id in use is 2^64 - 2): give ids explicitly");
   }
 }
 
-DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp, std::optional<uint64_t> id) {
+DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp,
+                                      std::optional<uint64_t> id) {
   checkId(id);
   const auto start = Clock::now();
   Features features = extractor_.extract(image, format);
@@ -208,7 +216,8 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
   if (verifier_ && !result.candidates.empty()) {
     start = Clock::now();
     const Features query_features = this->features(result.query_index);
-    for (LoopCandidate& c : result.candidates) c.verification = verifier_->verify(query_features, this->features(c.index));
+    for (LoopCandidate& c : result.candidates)
+      c.verification = verifier_->verify(query_features, this->features(c.index));
     result.stats.verify_ms = msSince(start);
   }
   for (LoopCandidate& c : result.candidates) {

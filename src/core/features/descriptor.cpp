@@ -25,8 +25,8 @@ DescriptorList descriptorsFromMat(const cv::Mat& descriptors) {
 DescriptorList descriptorsFromBytes(const uint8_t* data, size_t size, long expected_rows) {
   if (size % kDescriptorBytes != 0) {
     std::ostringstream msg;
-    msg << "descriptor data must be a multiple of " << kDescriptorBytes << " bytes (256-bit ORB rows), got "
-        << size << " bytes";
+    msg << "descriptor data must be a multiple of " << kDescriptorBytes << " bytes (256-bit ORB rows), got " << size
+        << " bytes";
     throw InvalidInput(msg.str());
   }
   const size_t rows = size / kDescriptorBytes;

@@ -12,11 +12,14 @@ namespace {
 
 int channelsOf(PixelFormat f) {
   switch (f) {
-    case PixelFormat::kGray: return 1;
+    case PixelFormat::kGray:
+      return 1;
     case PixelFormat::kBgr:
-    case PixelFormat::kRgb: return 3;
+    case PixelFormat::kRgb:
+      return 3;
     case PixelFormat::kBgra:
-    case PixelFormat::kRgba: return 4;
+    case PixelFormat::kRgba:
+      return 4;
   }
   return 0;
 }
@@ -77,11 +80,21 @@ cv::Mat toGray(const cv::Mat& image, PixelFormat format) {
   }
   cv::Mat gray;
   switch (format) {
-    case PixelFormat::kGray: gray = image; break;
-    case PixelFormat::kBgr: cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY); break;
-    case PixelFormat::kRgb: cv::cvtColor(image, gray, cv::COLOR_RGB2GRAY); break;
-    case PixelFormat::kBgra: cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY); break;
-    case PixelFormat::kRgba: cv::cvtColor(image, gray, cv::COLOR_RGBA2GRAY); break;
+    case PixelFormat::kGray:
+      gray = image;
+      break;
+    case PixelFormat::kBgr:
+      cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+      break;
+    case PixelFormat::kRgb:
+      cv::cvtColor(image, gray, cv::COLOR_RGB2GRAY);
+      break;
+    case PixelFormat::kBgra:
+      cv::cvtColor(image, gray, cv::COLOR_BGRA2GRAY);
+      break;
+    case PixelFormat::kRgba:
+      cv::cvtColor(image, gray, cv::COLOR_RGBA2GRAY);
+      break;
   }
   return gray;
 }

@@ -1,8 +1,8 @@
 #include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
 
 #include <algorithm>
-#include <cstring>
 #include <cmath>
+#include <cstring>
 #include <numeric>
 #include <string>
 
@@ -10,7 +10,8 @@
 
 namespace mild {
 
-ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const FilterParams& params) : params_((params.validate(), params)) {
+ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const FilterParams& params)
+    : params_((params.validate(), params)) {
   const double total = std::accumulate(params_.motion_kernel.begin(), params_.motion_kernel.end(), 0.0);
   for (double w : params_.motion_kernel) kernel_.push_back(w / total);
 }

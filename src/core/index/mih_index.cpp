@@ -28,7 +28,8 @@ void MihParams::validate() const {
                        std::to_string(SubstringLayout::kMaxSubstrings) + "], got " + std::to_string(num_tables));
   }
   if (radius < 0 || radius > kMaxRadius) {
-    throw InvalidInput("index/radius must be in [0, " + std::to_string(kMaxRadius) + "], got " + std::to_string(radius));
+    throw InvalidInput("index/radius must be in [0, " + std::to_string(kMaxRadius) + "], got " +
+                       std::to_string(radius));
   }
   if (!(bucket_cap_factor > 0.0) || !std::isfinite(bucket_cap_factor)) {
     throw InvalidInput("index/bucket_cap_factor must be a positive number, got " + std::to_string(bucket_cap_factor));

@@ -9,9 +9,9 @@
 
 #include <atomic>
 #include <cerrno>
-#include <cstdio>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <map>
 #include <optional>
@@ -22,7 +22,6 @@
 
 namespace mild {
 namespace {
-
 
 constexpr char kMagic[8] = {'M', 'I', 'L', 'D', 'L', 'C', 'D', '\0'};
 constexpr size_t kHeaderBytes = 32;
@@ -311,8 +310,8 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   (void)payload_crc;
 #endif
   if (version != kDatabaseFormatVersion && version != 1) {
-    throw InvalidInput(origin + ": database format version " + std::to_string(version) + "; this mild_lcd reads versions 1 to " +
-                       std::to_string(kDatabaseFormatVersion));
+    throw InvalidInput(origin + ": database format version " + std::to_string(version) +
+                       "; this mild_lcd reads versions 1 to " + std::to_string(kDatabaseFormatVersion));
   }
   if (flags != 0) throw InvalidInput(origin + ": unknown format flags " + std::to_string(flags));
   if (payload_size != size - kHeaderBytes) {
@@ -429,13 +428,14 @@ DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_
                        " bytes of data, the file holds " + std::to_string(size - kHeaderBytes));
   }
   if (size > max_bytes) {
-    throw CapacityError(origin + ": " + std::to_string(size >> 20) + " MB, over the " + std::to_string(max_bytes >> 20) +
-                        " MB allowed (~max_database_mb)");
+    throw CapacityError(origin + ": " + std::to_string(size >> 20) + " MB, over the " +
+                        std::to_string(max_bytes >> 20) + " MB allowed (~max_database_mb)");
   }
   try {
     std::vector<uint8_t> bytes(static_cast<size_t>(size));
     std::memcpy(bytes.data(), header.data(), kHeaderBytes);
-    readExactly(fd.fd, bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes, static_cast<off_t>(kHeaderBytes), origin);
+    readExactly(fd.fd, bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes, static_cast<off_t>(kHeaderBytes),
+                origin);
     return parseDetectorState(bytes.data(), bytes.size(), origin);
   } catch (const std::bad_alloc&) {
     throw CapacityError(origin + ": not enough memory to load a database of " + std::to_string(size >> 20) + " MB");
@@ -466,20 +466,23 @@ PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file,
   } catch (const InvalidInput& e) {
     throw InvalidInput(file.display() + ": " + e.what());
   } catch (const std::bad_alloc&) {
-    throw CapacityError(file.display() + ": not enough memory to rebuild the index of " + std::to_string(report.keyframes) +
-                        " keyframes");
+    throw CapacityError(file.display() + ": not enough memory to rebuild the index of " +
+                        std::to_string(report.keyframes) + " keyframes");
   }
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::ostringstream msg;
   msg.precision(3);
   msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << file.display()
-      << " in " << report.seconds << " s" << (continue_session ? ", continuing the saved session" : ", as a new session");
+      << " in " << report.seconds << " s"
+      << (continue_session ? ", continuing the saved session" : ", as a new session");
   if (!differing.empty()) msg << "; index rebuilt with this node's parameters (" << differing << ")";
   report.message = msg.str();
   return PreparedLoad{std::move(*restore), std::move(report)};
 }
 
-void commitLoad(LoopDetector& detector, PreparedLoad&& prepared) { detector.commitRestore(std::move(prepared.restore)); }
+void commitLoad(LoopDetector& detector, PreparedLoad&& prepared) {
+  detector.commitRestore(std::move(prepared.restore));
+}
 
 LoadReport loadDetector(LoopDetector& detector, const ConfinedFile& file, bool continue_session,
                         unsigned long long max_bytes) {

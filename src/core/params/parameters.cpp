@@ -45,7 +45,8 @@ bool inNamespaces(const std::string& name) {
 }  // namespace
 
 const std::vector<std::string>& detectorParameterNamespaces() {
-  static const std::vector<std::string> namespaces = {"orb", "index", "similarity", "filter", "detector", "verification", "scoring"};
+  static const std::vector<std::string> namespaces = {"orb",      "index",        "similarity", "filter",
+                                                      "detector", "verification", "scoring"};
   return namespaces;
 }
 
@@ -65,9 +66,12 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
       if (auto v = source.getString(name)) field = *v;
     } else if constexpr (std::is_same_v<T, SearchMode>) {
       if (auto v = source.getString(name)) {
-        if (*v == "index") field = SearchMode::kIndex;
-        else if (*v == "exact") field = SearchMode::kExact;
-        else throw InvalidInput("parameter " + name + " must be 'index' or 'exact', got '" + *v + "'");
+        if (*v == "index")
+          field = SearchMode::kIndex;
+        else if (*v == "exact")
+          field = SearchMode::kExact;
+        else
+          throw InvalidInput("parameter " + name + " must be 'index' or 'exact', got '" + *v + "'");
       }
     } else {
       static_assert(std::is_integral_v<T>);
@@ -187,7 +191,8 @@ std::optional<double> YamlParameterSource::getDouble(const std::string& name) co
 std::optional<std::vector<double>> YamlParameterSource::getDoubleList(const std::string& name) const {
   const Value* v = find(name);
   if (v == nullptr) return std::nullopt;
-  if (!v->is_list) throw InvalidInput(origin_ + ": parameter " + name + " must be a list of numbers, such as [0.3, 1.0]");
+  if (!v->is_list)
+    throw InvalidInput(origin_ + ": parameter " + name + " must be a list of numbers, such as [0.3, 1.0]");
   std::vector<double> out;
   for (const std::string& item : v->items) {
     auto d = parseDouble(item);

@@ -21,8 +21,9 @@ struct Vote {
 void removeDuplicateVotes(std::vector<Vote>& votes) {
   if (votes.size() < 2) return;
   std::sort(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature < b.feature; });
-  votes.erase(std::unique(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature == b.feature; }),
-              votes.end());
+  votes.erase(
+      std::unique(votes.begin(), votes.end(), [](const Vote& a, const Vote& b) { return a.feature == b.feature; }),
+      votes.end());
 }
 
 // Turns the votes of one query feature into per-keyframe similarity (the burstiness weighting of

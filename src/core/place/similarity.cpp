@@ -18,8 +18,9 @@ void SimilarityParams::validate() const {
     throw InvalidInput("similarity/burstiness_regularizer must be >= 0, got " + std::to_string(burstiness_regularizer));
   }
   if (early_termination_threshold < 0 || early_termination_threshold > 64) {
-    throw InvalidInput("similarity/early_termination_threshold must be in [0, 64] (bits of the first 64-bit word), got " +
-                       std::to_string(early_termination_threshold));
+    throw InvalidInput(
+        "similarity/early_termination_threshold must be in [0, 64] (bits of the first 64-bit word), got " +
+        std::to_string(early_termination_threshold));
   }
 }
 

@@ -26,7 +26,8 @@ void VerificationParams::validate() const {
   if (min_inliers < kMinimalMatches) {
     throw InvalidInput("verification/min_inliers must be >= " + std::to_string(kMinimalMatches));
   }
-  if (usesIntrinsics() && !(fy > 0.0 && std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy))) {
+  if (usesIntrinsics() &&
+      !(fy > 0.0 && std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy))) {
     throw InvalidInput("verification/fx, fy must both be positive (and cx, cy finite) to use the essential matrix");
   }
 }
@@ -39,7 +40,8 @@ Verification GeometricVerifier::verify(const Features& query, const Features& ca
 }
 
 GeometricCheck GeometricVerifier::check(const Features& query, const Features& candidate) const {
-  if (query.keypoints.size() != query.descriptors.size() || candidate.keypoints.size() != candidate.descriptors.size()) {
+  if (query.keypoints.size() != query.descriptors.size() ||
+      candidate.keypoints.size() != candidate.descriptors.size()) {
     throw InvalidInput("geometric verification needs one keypoint per descriptor");
   }
   return fit(query.keypoints, candidate.keypoints, matcher_.match(query.descriptors, candidate.descriptors));
@@ -60,7 +62,8 @@ GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, co
     if (m.query < 0 || m.train < 0 || static_cast<size_t>(m.query) >= query.size() ||
         static_cast<size_t>(m.train) >= train.size()) {
       throw InvalidInput("match refers to keypoint " + std::to_string(m.query) + "/" + std::to_string(m.train) +
-                         " outside the " + std::to_string(query.size()) + "/" + std::to_string(train.size()) + " given");
+                         " outside the " + std::to_string(query.size()) + "/" + std::to_string(train.size()) +
+                         " given");
     }
     p1.push_back(query[m.query].pt);
     p2.push_back(train[m.train].pt);

@@ -23,16 +23,19 @@ void addMasks(int length, int radius, int first_bit, uint64_t mask, std::vector<
 void SparseMatchParams::validate() const {
   if (num_tables < SubstringLayout::kMinSubstrings || num_tables > SubstringLayout::kMaxSubstrings ||
       (kDescriptorBits + num_tables - 1) / num_tables > kMaxTableBits) {
-    throw InvalidInput("sparse match num_tables (verification/num_tables) must be in [13, 64] (substrings of at most 20 bits), got " +
-                       std::to_string(num_tables));
+    throw InvalidInput(
+        "sparse match num_tables (verification/num_tables) must be in [13, 64] (substrings of at most 20 bits), got " +
+        std::to_string(num_tables));
   }
   if (radius < 0 || radius > kMaxRadius) {
     throw InvalidInput("sparse match radius (verification/radius) must be in [0, 2], got " + std::to_string(radius));
   }
   if (max_distance < 0 || max_distance > kDescriptorBits) {
-    throw InvalidInput("sparse match max_distance (verification/max_distance) must be in [0, 256], got " + std::to_string(max_distance));
+    throw InvalidInput("sparse match max_distance (verification/max_distance) must be in [0, 256], got " +
+                       std::to_string(max_distance));
   }
-  if (!(ratio >= 0.0 && ratio <= 1.0)) throw InvalidInput("sparse match ratio (verification/ratio) must be in [0, 1] (0 = off)");
+  if (!(ratio >= 0.0 && ratio <= 1.0))
+    throw InvalidInput("sparse match ratio (verification/ratio) must be in [0, 1] (0 = off)");
   if (!(max_keypoint_distance >= 0.0) || !std::isfinite(max_keypoint_distance)) {
     throw InvalidInput("sparse match max_keypoint_distance must be >= 0 (0 = off)");
   }

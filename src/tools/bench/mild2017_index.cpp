@@ -6,12 +6,17 @@
 namespace mild::tools {
 namespace {
 
-uint32_t substring16(const Descriptor& d, int t) { return static_cast<uint32_t>((d.words[t / 4] >> (16 * (t % 4))) & 0xFFFF); }
+uint32_t substring16(const Descriptor& d, int t) {
+  return static_cast<uint32_t>((d.words[t / 4] >> (16 * (t % 4))) & 0xFFFF);
+}
 
 }  // namespace
 
 Mild2017Index::Mild2017Index(const DatabaseParams& params)
-    : params_(params), phi_(params.similarity), buckets_(kTables * kBucketsPerTable), discarded_(buckets_.size(), false) {}
+    : params_(params),
+      phi_(params.similarity),
+      buckets_(kTables * kBucketsPerTable),
+      discarded_(buckets_.size(), false) {}
 
 void Mild2017Index::insert(const DescriptorList& descriptors) {
   const uint32_t k = static_cast<uint32_t>(keyframes_.size());

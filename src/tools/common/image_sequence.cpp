@@ -14,7 +14,7 @@ namespace mild::tools {
 bool hasImageExtension(const std::string& path) {
   std::string ext = fs::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  static const char* kImageExtensions[] = {".jpg", ".jpeg", ".png", ".bmp", ".pgm", ".ppm", ".pnm",
+  static const char* kImageExtensions[] = {".jpg", ".jpeg", ".png",  ".bmp", ".pgm", ".ppm", ".pnm",
                                            ".tif", ".tiff", ".webp", ".jp2", ".exr", ".hdr"};
   return std::any_of(std::begin(kImageExtensions), std::end(kImageExtensions), [&](const char* e) { return ext == e; });
 }
@@ -34,8 +34,8 @@ ImageSequence openImageSequence(const std::string& dir, double fallback_fps) {
   std::sort(files.begin(), files.end());
   for (const auto& f : files) (hasImageExtension(f) ? seq.frames : seq.ignored).push_back(f);
   if (seq.frames.empty()) {
-    throw InvalidInput(seq.image_dir + ": no image files (" + std::to_string(files.size()) + " other file(s)) — expected " +
-                       "frames such as 000000.jpg in file-name order");
+    throw InvalidInput(seq.image_dir + ": no image files (" + std::to_string(files.size()) +
+                       " other file(s)) — expected " + "frames such as 000000.jpg in file-name order");
   }
 
   std::ifstream times(fs::path(dir) / "times.txt");

@@ -10,11 +10,11 @@ namespace mild::tools {
 // DIR/images when DIR has that subfolder (the ../shared/bench layout, whose gt_loops.txt and
 // times.txt sit in DIR).
 struct ImageSequence {
-  std::string root;                 // DIR
-  std::string image_dir;            // DIR or DIR/images
-  std::vector<std::string> frames;  // full paths, name order
-  std::vector<std::string> ignored; // non-image files found beside the frames
-  std::vector<double> stamps;       // seconds per frame: times.txt when it matches, else index / fps
+  std::string root;                  // DIR
+  std::string image_dir;             // DIR or DIR/images
+  std::vector<std::string> frames;   // full paths, name order
+  std::vector<std::string> ignored;  // non-image files found beside the frames
+  std::vector<double> stamps;        // seconds per frame: times.txt when it matches, else index / fps
   bool stamps_from_file = false;
 };
 

@@ -27,7 +27,8 @@ class ProgressBar {
     const int filled = total_ ? static_cast<int>(width * done / total_) : width;
     std::string bar(static_cast<size_t>(filled), '#');
     bar.resize(width, '.');
-    std::printf("\r%s [%s] %zu/%zu  %.1f/s  ETA %ds   ", label_.c_str(), bar.c_str(), done, total_, rate, static_cast<int>(eta));
+    std::printf("\r%s [%s] %zu/%zu  %.1f/s  ETA %ds   ", label_.c_str(), bar.c_str(), done, total_, rate,
+                static_cast<int>(eta));
     std::fflush(stdout);
   }
 
