@@ -4,6 +4,7 @@
 #include <string>
 
 #include <sensor_msgs/image_encodings.h>
+#include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
 
 #include "mild_lcd/common/errors.hpp"
@@ -32,6 +33,11 @@ cv::Mat wrap(const sensor_msgs::Image& msg, int type) {
   if (msg.step < row_bytes) {
     throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is smaller than a row of " +
                              std::to_string(msg.width) + " pixels (" + std::to_string(row_bytes) + " bytes)");
+  }
+  // OpenCV refuses (throws on) rows that do not start on a whole sample, e.g. an odd step in mono16.
+  if (msg.step % CV_ELEM_SIZE1(type) != 0) {
+    throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is not a multiple of the " +
+                             std::to_string(CV_ELEM_SIZE1(type)) + "-byte sample of " + msg.encoding);
   }
   if (msg.data.size() < static_cast<size_t>(msg.step) * msg.height) {
     throw mild::InvalidInput("image data holds " + std::to_string(msg.data.size()) + " bytes but " +
@@ -205,6 +211,24 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
     m.inlier_ratio = c.verification.inlier_ratio;
     m.coverage = c.verification.coverage;
     m.homography_share = c.verification.homography_share;
+    const mild::RelativePose& pose = c.verification.pose;
+    m.has_relative_pose = pose.valid;
+    if (pose.valid) {
+      Eigen::Matrix3d rotation;
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) rotation(r, c) = pose.rotation(r, c);
+      const Eigen::Quaterniond q(rotation);
+      m.relative_rotation.x = q.x();
+      m.relative_rotation.y = q.y();
+      m.relative_rotation.z = q.z();
+      m.relative_rotation.w = q.w();
+      m.relative_translation.x = pose.translation[0];
+      m.relative_translation.y = pose.translation[1];
+      m.relative_translation.z = pose.translation[2];
+      m.pose_inliers = pose.inliers;
+    } else {
+      m.relative_rotation.w = 1.0;  // identity, never an invalid all-zero quaternion
+    }
     msg.candidates.push_back(m);
   }
   return msg;

@@ -21,6 +21,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/offline/pose_evaluation.hpp"
 #include "mild_lcd/params/parameters.hpp"
 #include "offline_plots.hpp"
 
@@ -38,6 +39,7 @@ struct Options {
   std::string stats;
   std::string similarity;
   std::string details;
+  std::string poses;
   double fps = 10.0;
   int min_gap = 40;
   bool print_config = false;
@@ -76,6 +78,14 @@ int run(const Options& opt) {
   std::optional<mild::GroundTruth> truth;
   if (!opt.gt.empty())
     truth = mild::loadGroundTruth(opt.gt, static_cast<long>(seq.frames.size()));  // fail before the long run, not after
+  std::vector<mild::PlanarPose> poses;
+  if (!opt.poses.empty()) poses = mild::loadPlanarPoses(opt.poses, static_cast<long>(seq.frames.size()));
+  struct EstimatedPose {
+    size_t query;
+    uint64_t candidate;
+    mild::RelativePose pose;
+  };
+  std::vector<EstimatedPose> estimated;
   for (const auto& f : seq.ignored) std::cerr << "note: ignoring non-image file " << f << "\n";
 
   std::ofstream csv(opt.output);
@@ -115,6 +125,7 @@ int run(const Options& opt) {
       if (!detector.verifies() || c.verification.verified) {
         csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
       }
+      if (c.verification.pose.valid) estimated.push_back({i, c.id, c.verification.pose});
       if (details.is_open()) {
         const mild::Verification& v = c.verification;
         details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
@@ -147,6 +158,32 @@ int run(const Options& opt) {
     }
   }
 
+  json pose_summary;
+  if (!poses.empty()) {
+    // Relative poses of the verified candidates that are true loops (all of them without --gt).
+    mild::PoseErrors errors;
+    for (const EstimatedPose& e : estimated) {
+      if (e.candidate >= poses.size()) continue;
+      if (truth && !truth->right.count({static_cast<int>(e.query), static_cast<int>(e.candidate)})) continue;
+      errors.add(e.pose, poses[e.query], poses[e.candidate]);
+    }
+    const auto rot = mild::tools::summarize(errors.rotation_deg);
+    const auto dir = mild::tools::summarize(errors.translation_deg);
+    pose_summary = {{"poses", errors.rotation_deg.size()},
+                    {"rotation_error_deg", {{"median", rot.median}, {"p95", rot.p95}}},
+                    {"translation_direction_pairs", errors.translation_deg.size()},
+                    {"translation_direction_error_deg", {{"median", dir.median}, {"p95", dir.p95}}}};
+    if (errors.rotation_deg.empty()) {
+      std::printf("relative pose: none estimated (verification needs the intrinsics verification/fx, fy, cx, cy)\n");
+    } else {
+      std::printf(
+          "relative pose of %zu verified %s: rotation error median %.2f deg (p95 %.2f); baseline direction error"
+          " median %.1f deg (p95 %.1f) over the %zu pairs >= %.1f m apart\n",
+          errors.rotation_deg.size(), truth ? "true loops" : "candidates", rot.median, rot.p95, dir.median, dir.p95,
+          errors.translation_deg.size(), errors.min_baseline_m);
+    }
+  }
+
   if (!opt.stats.empty()) {
     json stats = {{"extract_ms", timingJson(extract_ms)},
                   {"query_ms", timingJson(query_ms)},
@@ -159,6 +196,7 @@ int run(const Options& opt) {
                   {"frames", n},
                   {"skipped_frames", skipped}};
     if (detector.verifies()) stats["verify_ms"] = timingJson(verify_ms);
+    if (!pose_summary.is_null()) stats["relative_pose"] = pose_summary;
     std::ofstream out(opt.stats);
     out << stats.dump(2) << "\n";
     if (!out) throw mild::InvalidInput(opt.stats + ": cannot write the stats file");
@@ -198,6 +236,9 @@ int main(int argc, char** argv) {
   app.add_option("--stats", opt.stats, "JSON file for per-stage timing and database size");
   app.add_option("--details", opt.details,
                  "CSV of every candidate with probability, similarity, matches, inliers and the verdict");
+  app.add_option("--poses", opt.poses,
+                 "poses.txt (x y yaw per frame): report the relative-pose errors of verified true loops "
+                 "(needs the camera intrinsics in --config)");
   app.add_option("--similarity", opt.similarity, "write the raw similarity matrix (frames x frames, float32 .npy)");
   app.add_option("--fps", opt.fps, "frame rate for time stamps when the sequence has no times.txt")
       ->check(CLI::PositiveNumber);

@@ -272,5 +272,47 @@ TEST(Conversions, StampsOutsideRosTimeAreClamped) {
   EXPECT_EQ(stampOf(12.5), ros::Time(12.5));
 }
 
+TEST(Conversions, AStepThatSplitsASampleIsRefusedNotThrownByOpenCv) {
+  // Found by fuzz_keyframe_message: mono16 rows of an odd number of bytes made cv::Mat throw.
+  sensor_msgs::Image msg;
+  msg.encoding = "mono16";
+  msg.width = 4;
+  msg.height = 2;
+  msg.step = 9;
+  msg.data.assign(18, 0);
+  try {
+    imageFromMsg(msg, 1u << 24);
+    FAIL() << "an odd mono16 step was accepted";
+  } catch (const mild::InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("multiple of the 2-byte sample"), std::string::npos) << e.what();
+  }
+  msg.step = 10;
+  msg.data.assign(20, 0);
+  EXPECT_EQ(imageFromMsg(msg, 1u << 24).image.rows, 2) << "an even padded step is fine";
+}
+
+TEST(Conversions, TheRelativePoseIsPublishedAsAUnitQuaternionAndDirection) {
+  mild::DetectionResult result;
+  mild::LoopCandidate posed, plain;
+  const double a = 30.0 * M_PI / 180.0;  // about the optical y axis
+  posed.verification.pose.valid = true;
+  posed.verification.pose.rotation = cv::Matx33d(std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a));
+  posed.verification.pose.translation = cv::Vec3d(0.6, 0.0, 0.8);
+  posed.verification.pose.inliers = 42;
+  result.candidates = {posed, plain};
+  const LoopClosure msg = loopClosureToMsg(result, std_msgs::Header(), 10);
+  ASSERT_EQ(msg.candidates.size(), 2u);
+  const auto& q = msg.candidates[0].relative_rotation;
+  EXPECT_TRUE(msg.candidates[0].has_relative_pose);
+  EXPECT_NEAR(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w, 1.0, 1e-12);
+  EXPECT_NEAR(q.y, std::sin(a / 2), 1e-12);
+  EXPECT_NEAR(q.w, std::cos(a / 2), 1e-12);
+  EXPECT_DOUBLE_EQ(msg.candidates[0].relative_translation.x, 0.6);
+  EXPECT_DOUBLE_EQ(msg.candidates[0].relative_translation.z, 0.8);
+  EXPECT_EQ(msg.candidates[0].pose_inliers, 42);
+  EXPECT_FALSE(msg.candidates[1].has_relative_pose);
+  EXPECT_EQ(msg.candidates[1].relative_rotation.w, 1.0) << "identity, not an invalid zero quaternion";
+}
+
 }  // namespace
 }  // namespace mild_lcd

@@ -75,6 +75,31 @@ TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
   }
 }
 
+TEST_F(MildOffline, ReportsRelativePoseErrorsWithIntrinsics) {
+  // The fixture's exclusion plus the bench camera: verified true loops carry a relative pose.
+  std::ofstream(path("camera.yaml")) << readFile(kFixtureConfig)
+                                     << "verification: {fx: 256.0, fy: 256.0, cx: 159.5, cy: 119.5}\n";
+  const ProcessResult run = mildOffline("--images " + kFixture + " --config " + path("camera.yaml") + " --output " +
+                                        path("c.csv") + " --gt " + kFixture + "/gt_loops.txt --min-gap 8 --poses " +
+                                        kFixture + "/poses.txt --stats " + path("s.json"));
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_NE(run.output.find("relative pose of "), std::string::npos) << run.output;
+  const auto pose = nlohmann::json::parse(readFile(path("s.json")))["relative_pose"];
+  EXPECT_GE(pose["poses"].get<int>(), 5) << pose.dump();
+  EXPECT_LT(pose["rotation_error_deg"]["median"].get<double>(), 6.0) << pose.dump();
+
+  const ProcessResult without = mildOffline("--images " + kFixture + " --config " + kFixtureConfig + " --output " +
+                                            path("d.csv") + " --poses " + kFixture + "/poses.txt");
+  ASSERT_EQ(without.status, 0) << without.output;
+  EXPECT_NE(without.output.find("none estimated"), std::string::npos) << without.output;
+
+  std::ofstream(path("short_poses.txt")) << "0 0 0\n";
+  const ProcessResult wrong_count =
+      mildOffline("--images " + kFixture + " --output " + path("e.csv") + " --poses " + path("short_poses.txt"));
+  EXPECT_EQ(wrong_count.status, 2) << wrong_count.output;
+  EXPECT_NE(wrong_count.output.find("poses for"), std::string::npos) << wrong_count.output;
+}
+
 TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {
   // Frames 0..11 of the fixture directly in a folder, frame 5 replaced by garbage.
   for (int i = 0; i < 12; ++i) {

@@ -4,6 +4,7 @@
 
 #include "mild_lcd/features/feature_extractor.hpp"
 #include "mild_lcd/features/feature_match.hpp"
+#include "mild_lcd/verification/relative_pose.hpp"
 
 namespace mild {
 
@@ -17,6 +18,7 @@ struct Verification {
   double coverage = 0.0;                     // inlierCoverage, the smaller of the two images' (inlier_layout.hpp)
   double homography_share = 0.0;             // homographyShare of the inliers
   std::vector<FeatureMatch> inlier_matches;  // the matches consistent with the model
+  RelativePose pose;                         // of a verified candidate, when intrinsics are known
 };
 
 // The seam between loop detection and geometry: given the query's and a candidate's features,

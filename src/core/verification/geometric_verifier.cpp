@@ -99,6 +99,10 @@ GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, co
   out.verification.inliers = inliers;
   out.verification.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(out.matches.size());
   out.verification.verified = inliers >= params_.min_inliers;
+  if (out.verification.verified && params_.usesIntrinsics()) {
+    const cv::Matx33d k(params_.fx, 0, params_.cx, 0, params_.fy, params_.cy, 0, 0, 1);
+    out.verification.pose = relativePoseFromEssential(out.model, q_in, t_in, k, params_.min_inliers);
+  }
   return out;
 }
 
