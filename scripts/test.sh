@@ -11,7 +11,8 @@ set -eo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 if [[ -n "${MILD_SANITIZE:-}" ]]; then
   # Under build/, where rosrun does not look, so `rosrun mild_lcd mild_lcd_node` stays unambiguous.
-  BUILD_DIR="${BUILD_DIR:-$HERE/../build/sanitize-${MILD_SANITIZE//,/-}}"
+  # A normalised path: the node refuses map paths with ".." (the rostests keep maps under it).
+  BUILD_DIR="${BUILD_DIR:-$(cd "$HERE/.." && pwd)/build/sanitize-${MILD_SANITIZE//,/-}}"
   MILD_CMAKE_ARGS="${MILD_CMAKE_ARGS:-} -DMILD_SANITIZE=$MILD_SANITIZE"
   FUZZ_SECONDS="${FUZZ_SECONDS:-0}"  # the fuzzers carry their own sanitizers
 fi
