@@ -82,27 +82,10 @@ for spec in specs:
     gt = f"{folder}/gt_loops.txt"
     m = json.loads(subprocess.run([f"{out}/../devel/lib/mild_lcd/mild_score", gt, f"{out}/{name}.csv", "--json"],
                                   capture_output=True, text=True, check=True).stdout)
-    truth, dc, queries = set(), set(), set()
-    for line in open(gt):
-        p = line.split()
-        if len(p) >= 4 and not p[0].startswith("#"):
-            (truth if p[3] == "1" else dc).add((int(p[0]), int(p[1])))
-            if p[3] == "1":
-                queries.add(int(p[0]))
-    best = {}
-    for line in open(f"{out}/{name}.csv"):
-        p = line.strip().split(",")
-        if p[0] == "query" or int(p[0]) - int(p[1]) < 40:
-            continue
-        i, j, s = int(p[0]), int(p[1]), float(p[2])
-        if i not in best or s > best[i][1]:
-            best[i] = (j, s)
-    right = sum(1 for i, (j, s) in best.items() if s >= 0.5 and (i, j) in truth)
-    wrong = sum(1 for i, (j, s) in best.items() if s >= 0.5 and (i, j) not in truth and (i, j) not in dc)
     stats = json.load(open(f"{out}/{name}.json"))
     mild, ibow = peers.get(name, ("-", "-"))
     print(f"| {name} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | {m['max_f1']:.3f} | "
-          f"{right / max(1, right + wrong):.3f} ({wrong} wrong) | {right / max(1, len(queries)):.3f} | "
+          f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} | "
           f"{stats['query_ms']['mean']:.1f} | {mild} | {ibow} |")
 EOF
 

@@ -23,7 +23,10 @@ int main(int argc, char** argv) {
   app.add_option("--min-gap", min_gap, "pairs closer than this many frames are ignored")->check(CLI::NonNegativeNumber);
   app.add_flag("--json", json, "print one JSON object");
   return mild::tools::toolMain(app, argc, argv, [&] {
-    const mild::Metrics m = mild::evaluate(mild::loadGroundTruth(gt), mild::loadCandidates(candidates), min_gap);
+    const mild::GroundTruth truth = mild::loadGroundTruth(gt);
+    const std::vector<mild::ScoredPair> scored = mild::loadCandidates(candidates);
+    const mild::Metrics m = mild::evaluate(truth, scored, min_gap);
+    const mild::Decision half = mild::decideAt(truth, scored, 0.5, min_gap);
     if (json) {
       std::cout << nlohmann::json{{"loop_queries", m.loop_queries},
                                   {"scored_queries", m.scored_queries},
@@ -31,7 +34,11 @@ int main(int argc, char** argv) {
                                   {"false_positives", m.false_positives},
                                   {"recall_at_100_precision", m.recall_at_100_precision},
                                   {"average_precision", m.average_precision},
-                                  {"max_f1", m.max_f1}}
+                                  {"max_f1", m.max_f1},
+                                  {"precision_at_half", half.precision},
+                                  {"recall_at_half", half.recall},
+                                  {"right_at_half", half.right},
+                                  {"wrong_at_half", half.wrong}}
                        .dump()
                 << "\n";
     } else {
@@ -39,6 +46,8 @@ int main(int argc, char** argv) {
                   m.average_precision, m.max_f1);
       std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
                   m.scored_queries, m.true_positives, m.false_positives);
+      std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision,
+                  half.recall, half.right, half.wrong);
     }
     return 0;
   });

@@ -100,6 +100,20 @@ TEST_F(MildOffline, ReportsRelativePoseErrorsWithIntrinsics) {
   EXPECT_NE(wrong_count.output.find("poses for"), std::string::npos) << wrong_count.output;
 }
 
+TEST_F(MildOffline, MildScoreReportsTheDecisionAtOneHalf) {
+  // Two loop queries (50, 60); at p >= 0.5 one right (50 -> 0), one wrong (60 -> 15); 70 is below.
+  std::ofstream(path("gt.txt")) << "50 0 0.9 1\n60 10 0.9 1\n70 20 0.1 0\n";
+  std::ofstream(path("c.csv")) << "query,candidate,score\n50,0,0.9\n60,15,0.8\n70,20,0.2\n";
+  const ProcessResult run =
+      mild::test::runCommand(std::string(MILD_SCORE_BIN) + " " + path("gt.txt") + " " + path("c.csv") + " --json");
+  ASSERT_EQ(run.status, 0) << run.output;
+  const auto m = nlohmann::json::parse(mild::test::lastLine(run.output));
+  EXPECT_EQ(m["right_at_half"].get<int>(), 1);
+  EXPECT_EQ(m["wrong_at_half"].get<int>(), 1);
+  EXPECT_DOUBLE_EQ(m["precision_at_half"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(m["recall_at_half"].get<double>(), 0.5);
+}
+
 TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {
   // Frames 0..11 of the fixture directly in a folder, frame 5 replaced by garbage.
   for (int i = 0; i < 12; ++i) {
