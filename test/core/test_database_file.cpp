@@ -188,17 +188,76 @@ TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
   process(source, 0, 3);
   saveDetector(source, path("map.mild"));
   std::vector<uint8_t> data = bytes(path("map.mild"));
-  data[8] = 3;  // format version 3, with a header checksum that matches it
+  data[8] = 4;  // format version 4, with a header checksum that matches it
   const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
   std::memcpy(data.data() + 28, &header_crc, 4);
-  write(path("v3.mild"), data);
+  write(path("v4.mild"), data);
   try {
-    readDetectorFile(path("v3.mild"));
-    FAIL() << "read a version-3 file";
+    readDetectorFile(path("v4.mild"));
+    FAIL() << "read a version-4 file";
   } catch (const InvalidInput& e) {
-    EXPECT_NE(std::string(e.what()).find("format version 3; this mild_lcd reads versions 1 to 2"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("format version 4; this mild_lcd reads versions 1 to 3"), std::string::npos)
         << e.what();
   }
+}
+
+// Version 3 keeps each keyframe's camera intrinsics, so a loaded map still gives loops a pose.
+TEST_F(DatabaseFile, EachKeyframesCameraIsKept) {
+  LoopDetector source(fixtureParams());
+  const CameraIntrinsics camera{256.0, 255.0, 159.5, 119.5};
+  source.process(fixtureFrames()[0], PixelFormat::kGray, 0.0, std::nullopt, camera);
+  source.process(fixtureFrames()[1], PixelFormat::kGray, 0.5);  // one without
+  saveDetector(source, path("map.mild"));
+  const DetectorState state = readDetectorFile(path("map.mild"));
+  ASSERT_EQ(state.records.size(), 2u);
+  EXPECT_EQ(state.records[0].camera, camera);
+  EXPECT_FALSE(state.records[1].camera.known());
+}
+
+// A version-2 file (written before keyframes had cameras) loads as keyframes without intrinsics.
+// It is made from a version-3 file by removing the four doubles each keyframe record gained.
+TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 4);
+  saveDetector(source, path("map.mild"));
+  const std::vector<uint8_t> v3 = bytes(path("map.mild"));
+  std::vector<uint8_t> payload(v3.begin() + 32, v3.end());
+  size_t at = 0;
+  const auto u32 = [&](size_t pos) {
+    uint32_t v;
+    std::memcpy(&v, payload.data() + pos, 4);
+    return v;
+  };
+  at += 4 + u32(0);  // parameters
+  at += 4 + 8 + 4;   // descriptor width, next id, session start
+  const uint32_t keyframes = u32(at);
+  at += 4;
+  for (uint32_t k = 0; k < keyframes; ++k) {
+    at += 8 + 8 + 4;  // id, stamp, session
+    payload.erase(payload.begin() + static_cast<long>(at), payload.begin() + static_cast<long>(at + 32));
+    at += 4 + u32(at) * (24 + 32);  // keypoints and descriptors
+  }
+  std::vector<uint8_t> v2(v3.begin(), v3.begin() + 32);
+  v2.insert(v2.end(), payload.begin(), payload.end());
+  v2[8] = 2;
+  const uint64_t size = payload.size();
+  std::memcpy(v2.data() + 16, &size, 8);
+  const uint32_t payload_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), payload.data(), payload.size()));
+  std::memcpy(v2.data() + 24, &payload_crc, 4);
+  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), v2.data(), 28));
+  std::memcpy(v2.data() + 28, &header_crc, 4);
+  write(path("v2.mild"), v2);
+
+  LoopDetector loaded(fixtureParams());
+  loadDetector(loaded, path("v2.mild"), true);
+  ASSERT_EQ(loaded.size(), 4u);
+  for (KeyframeIndex k = 0; k < 4; ++k) {
+    EXPECT_EQ(loaded.record(k).id, source.record(k).id);
+    EXPECT_EQ(loaded.record(k).keypoints.size(), source.record(k).keypoints.size());
+    EXPECT_FALSE(loaded.record(k).camera.known());
+  }
+  EXPECT_EQ(loaded.process(fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity,
+            source.process(fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity);
 }
 
 TEST_F(DatabaseFile, OtherIndexParametersRebuildTheIndexAndSaySo) {

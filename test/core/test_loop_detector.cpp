@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include <filesystem>
 #include <set>
@@ -229,6 +230,65 @@ TEST(LoopDetector, RunsTheInstalledVerifierOnEveryCandidate) {
   }
   EXPECT_GT(candidates, 0u);
   EXPECT_EQ(static_cast<size_t>(seen->calls), candidates);
+}
+
+TEST(LoopDetector, RejectsDepthsAndCamerasThatDoNotFit) {
+  LoopDetector detector;
+  Features f;
+  f.keypoints.resize(3);
+  f.descriptors.resize(3);
+  f.depths.resize(2);
+  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
+  f.depths.clear();
+  f.camera = CameraIntrinsics{256.0, 0.0, 160.0, 120.0};
+  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
+  f.camera.fy = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
+  EXPECT_EQ(detector.size(), 0u);
+  f.camera.fy = 256.0;
+  detector.process(f, 0.0);
+  EXPECT_EQ(detector.record(0).camera, f.camera);
+}
+
+// Each stored keyframe keeps the camera it came with; the query's depths reach the verifier and
+// are not stored.
+class RecordingVerifier : public CandidateVerifier {
+ public:
+  mutable std::vector<std::pair<CameraIntrinsics, CameraIntrinsics>> cameras;
+  mutable std::vector<size_t> depths;
+  Verification verify(const Features& query, const Features& candidate) const override {
+    cameras.emplace_back(query.camera, candidate.camera);
+    depths.push_back(query.depths.size());
+    EXPECT_TRUE(candidate.depths.empty());
+    return {};
+  }
+};
+
+TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  DetectorParams p = fixtureParams();
+  p.candidates.near_past = false;
+  LoopDetector detector(p);
+  auto verifier = std::make_unique<RecordingVerifier>();
+  const RecordingVerifier* seen = verifier.get();
+  detector.setVerifier(std::move(verifier));
+  const OrbExtractor orb(p.orb);
+  const auto camera_of = [](size_t i) { return CameraIntrinsics{200.0 + i, 200.0 + i, 160.0, 120.0}; };
+  std::vector<uint64_t> queries_with_candidates;
+  for (size_t i = 0; i < 20; ++i) {
+    Features f = orb.extract(frames[i]);
+    f.camera = camera_of(i);
+    f.depths.assign(f.keypoints.size(), 2.5f);
+    const size_t before = seen->cameras.size();
+    const DetectionResult r = detector.process(std::move(f), i);
+    ASSERT_EQ(seen->cameras.size() - before, r.candidates.size());
+    for (size_t c = 0; c < r.candidates.size(); ++c) {
+      EXPECT_EQ(seen->cameras[before + c].first, camera_of(i));
+      EXPECT_EQ(seen->cameras[before + c].second, camera_of(r.candidates[c].id));
+      EXPECT_EQ(seen->depths[before + c], detector.record(r.query_index).keypoints.size());
+    }
+  }
+  EXPECT_GT(seen->cameras.size(), 0u);
 }
 
 TEST(LoopDetector, ResetForgetsEverything) {

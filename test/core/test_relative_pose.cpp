@@ -65,6 +65,109 @@ TEST(RelativePose, IsInvalidWithoutAModelOrEnoughPoints) {
   EXPECT_FALSE(mild::relativePoseFromEssential(cv::Mat::eye(3, 3, CV_64F), few, few, kCamera, 15).valid);
 }
 
+// A synthetic scene seen by two cameras: the candidate's centre and orientation in the query's
+// frame, the query's points with their depth, and their images in both cameras (with outliers).
+struct TwoViews {
+  cv::Matx33d rotation;
+  cv::Vec3d centre;
+  std::vector<cv::Point2f> query, candidate;
+  std::vector<float> depths;
+};
+
+TwoViews twoViews(const cv::Matx33d& query_camera, const cv::Matx33d& candidate_camera, double pixel_noise,
+                  double outlier_share) {
+  TwoViews v;
+  const double a = 15.0 * M_PI / 180.0;
+  v.rotation = cv::Matx33d(std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a));
+  v.centre = cv::Vec3d(0.8, 0.1, 0.4);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> lateral(-3.0, 3.0), depth(3.0, 10.0), unit(0.0, 1.0), pixel(0.0, 300.0);
+  std::normal_distribution<double> noise(0.0, pixel_noise);
+  const auto image = [](const cv::Matx33d& k, const cv::Vec3d& x) {
+    const cv::Vec3d u = k * x;
+    return cv::Point2f(static_cast<float>(u[0] / u[2]), static_cast<float>(u[1] / u[2]));
+  };
+  while (v.query.size() < 200) {
+    const cv::Vec3d x(lateral(rng), lateral(rng) * 0.5, depth(rng));
+    const cv::Vec3d in_candidate = v.rotation.t() * (x - v.centre);
+    if (in_candidate[2] < 1.0) continue;
+    cv::Point2f c = image(candidate_camera, in_candidate);
+    if (unit(rng) < outlier_share) c = cv::Point2f(static_cast<float>(pixel(rng)), static_cast<float>(pixel(rng)));
+    const cv::Point2f jitter(static_cast<float>(noise(rng)), static_cast<float>(noise(rng)));
+    v.query.push_back(image(query_camera, x));
+    v.candidate.push_back(c + jitter);
+    v.depths.push_back(static_cast<float>(x[2] * (1.0 + 0.005 * noise(rng))));
+  }
+  return v;
+}
+
+TEST(RelativePose, DepthOfTheQuerysKeypointsGivesAMetricPose) {
+  const cv::Matx33d other(300.0, 0.0, 170.0, 0.0, 298.0, 125.0, 0.0, 0.0, 1.0);
+  const TwoViews v = twoViews(kCamera, other, 0.5, 0.2);
+  const RelativePose pose = mild::relativePoseFromDepth(v.query, v.depths, v.candidate, kCamera, other, 3.0, 15);
+  ASSERT_TRUE(pose.valid);
+  EXPECT_TRUE(pose.metric);
+  EXPECT_LT(mild::rotationAngleDegrees(pose.rotation, v.rotation), 0.5);
+  EXPECT_LT(cv::norm(pose.translation - v.centre), 0.05) << pose.translation << " vs " << v.centre;
+  EXPECT_GE(pose.inliers, 140);  // ~80 % are inliers
+  EXPECT_LE(pose.inliers, 175);
+  EXPECT_GT(pose.reprojection_error, 0.0);
+  EXPECT_LT(pose.reprojection_error, 1.5);
+
+  // Unknown depths (0, NaN) are left out; too few known ones give no pose.
+  std::vector<float> sparse(v.depths.size(), 0.0f);
+  for (size_t i = 0; i < 10; ++i) sparse[i] = v.depths[i];
+  sparse[10] = std::nanf("");
+  EXPECT_FALSE(mild::relativePoseFromDepth(v.query, sparse, v.candidate, kCamera, other, 3.0, 15).valid);
+}
+
+mild::Features keypointsOnly(const std::vector<cv::Point2f>& points, const mild::CameraIntrinsics& camera) {
+  mild::Features f;
+  for (const cv::Point2f& p : points) f.keypoints.emplace_back(p, 31.0f);
+  f.descriptors.resize(points.size());
+  f.camera = camera;
+  return f;
+}
+
+TEST(GeometricVerifier, UsesEachKeyframesOwnCameraAndTheQuerysDepth) {
+  const mild::CameraIntrinsics query_camera{256.0, 256.0, 159.5, 119.5};
+  const mild::CameraIntrinsics candidate_camera{320.0, 318.0, 165.0, 121.0};  // another robot's camera
+  const TwoViews v = twoViews(query_camera.matrix(), candidate_camera.matrix(), 0.3, 0.2);
+  std::vector<mild::FeatureMatch> matches;
+  for (int i = 0; i < static_cast<int>(v.query.size()); ++i) matches.push_back({i, i, 0});
+  const mild::GeometricVerifier verifier{mild::VerificationParams{}};  // no configured intrinsics
+
+  mild::Features query = keypointsOnly(v.query, query_camera);
+  const mild::Features candidate = keypointsOnly(v.candidate, candidate_camera);
+  const mild::GeometricCheck two_view = verifier.fit(query, candidate, matches);
+  ASSERT_TRUE(two_view.verification.verified);
+  const RelativePose& up_to_scale = two_view.verification.pose;
+  ASSERT_TRUE(up_to_scale.valid);
+  EXPECT_FALSE(up_to_scale.metric);
+  EXPECT_LT(mild::rotationAngleDegrees(up_to_scale.rotation, v.rotation), 1.0);
+  EXPECT_LT(mild::directionAngleDegrees(up_to_scale.translation, v.centre), 3.0) << up_to_scale.translation;
+  EXPECT_GE(two_view.verification.inliers, 140);
+
+  query.depths = v.depths;
+  const RelativePose metric = verifier.fit(query, candidate, matches).verification.pose;
+  ASSERT_TRUE(metric.valid);
+  EXPECT_TRUE(metric.metric);
+  EXPECT_LT(cv::norm(metric.translation - v.centre), 0.05) << metric.translation;
+
+  // Without any intrinsics there is a fundamental matrix and no pose.
+  const mild::GeometricCheck projective =
+      verifier.fit(keypointsOnly(v.query, {}), keypointsOnly(v.candidate, {}), matches);
+  EXPECT_TRUE(projective.verification.verified);
+  EXPECT_FALSE(projective.verification.pose.valid);
+
+  // Malformed input is refused, not fitted.
+  query.depths.pop_back();
+  EXPECT_THROW(verifier.fit(query, candidate, matches), mild::InvalidInput);
+  query.depths.clear();
+  query.camera.fy = -1.0;
+  EXPECT_THROW(verifier.fit(query, candidate, matches), mild::InvalidInput);
+}
+
 TEST(PlanarGroundTruth, FollowsTheOpticalFrameConvention) {
   // Candidate 2 m straight ahead of a query looking along +x, turned 90 degrees to the left.
   const RelativePose ahead = mild::groundTruthRelativePose({0, 0, 0}, {2, 0, M_PI / 2});

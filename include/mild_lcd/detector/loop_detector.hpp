@@ -86,6 +86,7 @@ struct KeyframeRecord {
   double stamp = 0.0;
   uint32_t session = 0;
   std::vector<cv::KeyPoint> keypoints;
+  CameraIntrinsics camera;  // unknown unless the keyframe brought them
 };
 
 // Everything a detector has learnt, as plain data: what database_file.hpp saves and loads.
@@ -129,9 +130,11 @@ class LoopDetector {
   // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image, an
   // id already in the database or above kMaxKeyframeId. Without an id, the next free one (largest so
   // far + 1) is used; CapacityError once that would pass kMaxKeyframeId.
+  // `camera`: the image's intrinsics when known (they give verified loops a relative pose).
   DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
-                          std::optional<uint64_t> id = std::nullopt);
-  // Same, for features computed elsewhere (e.g. by the SLAM front-end).
+                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {});
+  // Same, for features computed elsewhere (e.g. by the SLAM front-end). Their camera is stored with
+  // the keyframe; their depths serve this query's verification only.
   DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
 
   // Replaces everything the detector has learnt by `state` (the index is rebuilt from the

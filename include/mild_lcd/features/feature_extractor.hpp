@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
 
+#include "mild_lcd/features/camera_intrinsics.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 
 namespace mild {
@@ -23,9 +24,14 @@ struct OrbParams {
 };
 
 // Keypoints and their 256-bit descriptors, row i of one describing keypoint i of the other.
+// Optionally the camera's intrinsics, and each keypoint's depth (metres along the optical axis,
+// from a depth camera or the front-end's triangulation; 0 or not finite = unknown), which make the
+// relative pose of a loop metric (PnP) instead of up to scale.
 struct Features {
   std::vector<cv::KeyPoint> keypoints;
   DescriptorList descriptors;
+  CameraIntrinsics camera;
+  std::vector<float> depths;  // empty, or one per keypoint
 };
 
 // Converts an 8-bit image of the given format to one grey channel. Throws InvalidInput for an empty

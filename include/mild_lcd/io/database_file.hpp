@@ -12,9 +12,10 @@ namespace mild {
 //
 // Layout (little-endian). Header, 32 bytes: magic "MILDLCD" + '\0', format version (u32), flags
 // (u32, 0), payload size (u64), CRC-32 of the payload (u32), CRC-32 of the 28 bytes before it
-// (u32). Payload (version 2): the saving detector's parameters as "name: value" lines, the
-// descriptor width in bits, next id, session start, the keyframes (id, stamp, session, keypoints,
-// descriptors), the temporal filter's name and its state. Version 1 files (no width, no sessions,
+// (u32). Payload (version 3): the saving detector's parameters as "name: value" lines, the
+// descriptor width in bits, next id, session start, the keyframes (id, stamp, session, camera
+// intrinsics fx fy cx cy as doubles, 0 = unknown, keypoints, descriptors), the temporal filter's
+// name and its state. Version 2 files (no intrinsics) and version 1 files (no width, no sessions,
 // the exclusive-hypothesis filter's posterior) are read too. The MIH index is not
 // stored: it is rebuilt from the descriptors on load, with the loading detector's parameters, so a
 // file written with other index parameters cannot be mixed with this index.
@@ -25,7 +26,7 @@ namespace mild {
 // one, both complete. Concurrent saves to one target never share a temporary file: each leaves a
 // complete file, the last rename wins. Temporary files left by killed saves are removed by the next
 // save to the same target (an unlocked one older than a minute).
-constexpr uint32_t kDatabaseFormatVersion = 2;
+constexpr uint32_t kDatabaseFormatVersion = 3;
 // Default bound on the size of a file to load (the node's ~max_database_mb).
 constexpr unsigned long long kDefaultMaxDatabaseBytes = 16ull << 30;
 

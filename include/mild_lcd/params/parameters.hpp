@@ -128,6 +128,7 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
   visit("verification/fy", p.verification.fy);
   visit("verification/cx", p.verification.cx);
   visit("verification/cy", p.verification.cy);
+  visit("verification/pnp_threshold", p.verification.pnp_threshold);
 
   visit("scoring/enabled", p.scoring.enabled);
   visit("scoring/weights", p.scoring.weights);

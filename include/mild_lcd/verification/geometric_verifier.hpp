@@ -19,12 +19,18 @@ struct VerificationParams {
   double ransac_threshold = 1.0;  // pixels
   double confidence = 0.999;
   int max_iterations = 1000;
+  // The camera's intrinsics when keyframes do not bring their own (Features::camera, e.g. from a
+  // sensor_msgs/CameraInfo); a keyframe's own take precedence.
   double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
+  // Metric pose of a verified loop when the query's keypoints carry depth: PnP inlier threshold
+  // (pixels in the candidate's image; looser than the two-view fit's, for the depth's own noise).
+  double pnp_threshold = 3.0;
   // A candidate is verified when at least min_inliers matches agree with the model. On the bench,
   // 12..20 give the same recall@100%P; 15 sits in the middle.
   int min_inliers = 15;
 
   bool usesIntrinsics() const { return fx > 0.0; }
+  CameraIntrinsics intrinsics() const { return {fx, fy, cx, cy}; }
   static SparseMatchParams withRatio(double ratio) {
     SparseMatchParams p;
     p.ratio = ratio;
@@ -51,11 +57,17 @@ class GeometricVerifier : public CandidateVerifier {
   Verification verify(const Features& query, const Features& candidate) const override;
   GeometricCheck check(const Features& query, const Features& candidate) const;
 
-  // The model fit alone, on given matches (keypoints index the matches' query/train fields).
+  // The model fit alone, on given matches (keypoints index the matches' query/train fields). The
+  // features' descriptors are not used; their cameras and the query's depths are.
+  GeometricCheck fit(const Features& query, const Features& train, std::vector<FeatureMatch> matches) const;
   GeometricCheck fit(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
                      std::vector<FeatureMatch> matches) const;
 
  private:
+  GeometricCheck fitViews(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
+                          const CameraIntrinsics& query_camera, const CameraIntrinsics& train_camera,
+                          const std::vector<float>& query_depths, std::vector<FeatureMatch> matches) const;
+
   VerificationParams params_;
   mutable SparseMatcher matcher_;  // reusable buffers; the verifier is not thread-safe
 };

@@ -10,13 +10,17 @@ namespace mild {
 // for a loop edge. Frames: OpenCV's camera axes (x right, y down, z forward; REP 103's optical
 // frame). rotation maps directions in the candidate camera's frame into the query camera's, and
 // translation is the candidate camera's centre in the query camera's frame, a unit vector: two views
-// fix the direction of the baseline but not its length. `inliers` are the matches in front of both
-// cameras (cheirality) under this pose.
+// fix the direction of the baseline but not its length, unless `metric`: then it is in metres,
+// from PnP on the query's keypoints with known depth. `inliers` are the matches that support it (in
+// front of both cameras for the essential matrix; within the reprojection threshold for PnP), and
+// `reprojection_error` their RMS reprojection error in the candidate's image (pixels; PnP only).
 struct RelativePose {
   bool valid = false;
+  bool metric = false;
   cv::Matx33d rotation = cv::Matx33d::eye();
   cv::Vec3d translation{0.0, 0.0, 0.0};
   int inliers = 0;
+  double reprojection_error = 0.0;
 };
 
 // Decomposes the essential matrix E of query -> candidate points (x_c^T E x_q = 0, as
@@ -26,6 +30,14 @@ struct RelativePose {
 RelativePose relativePoseFromEssential(const cv::Mat& essential, const std::vector<cv::Point2f>& query_points,
                                        const std::vector<cv::Point2f>& candidate_points, const cv::Matx33d& camera,
                                        int min_inliers);
+
+// Metric pose from the query's keypoints with depth (back-projected with query_camera into the
+// query's frame) and their matches in the candidate's image: PnP in a RANSAC loop (reprojection
+// threshold in pixels), refined on its inliers. depths[i] belongs to query_points[i]; points with
+// a depth <= 0 or not finite are left out. Invalid when fewer than min_inliers remain.
+RelativePose relativePoseFromDepth(const std::vector<cv::Point2f>& query_points, const std::vector<float>& depths,
+                                   const std::vector<cv::Point2f>& candidate_points, const cv::Matx33d& query_camera,
+                                   const cv::Matx33d& candidate_camera, double threshold_px, int min_inliers);
 
 // Angle of the rotation a^T b, in degrees (0 when equal).
 double rotationAngleDegrees(const cv::Matx33d& a, const cv::Matx33d& b);

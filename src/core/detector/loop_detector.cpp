@@ -127,7 +127,7 @@ std::optional<KeyframeIndex> LoopDetector::find(uint64_t id) const {
 }
 
 Features LoopDetector::features(KeyframeIndex k) const {
-  return Features{records_[k].keypoints, database_.descriptors(k)};
+  return Features{records_[k].keypoints, database_.descriptors(k), records_[k].camera, {}};
 }
 
 size_t LoopDetector::memoryBytes() const {
@@ -167,10 +167,11 @@ void LoopDetector::checkId(std::optional<uint64_t> id) const {
 }
 
 DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp,
-                                      std::optional<uint64_t> id) {
+                                      std::optional<uint64_t> id, const CameraIntrinsics& camera) {
   checkId(id);
   const auto start = Clock::now();
   Features features = extractor_.extract(image, format);
+  features.camera = camera;
   const double extract_ms = msSince(start);
   DetectionResult result = process(std::move(features), stamp, id);
   result.stats.extract_ms = extract_ms;
@@ -181,6 +182,13 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
   if (features.keypoints.size() != features.descriptors.size()) {
     throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
                        std::to_string(features.descriptors.size()) + " descriptors");
+  }
+  if (!features.depths.empty() && features.depths.size() != features.keypoints.size()) {
+    throw InvalidInput("keyframe has " + std::to_string(features.depths.size()) + " depths for " +
+                       std::to_string(features.keypoints.size()) + " keypoints (give one per keypoint, or none)");
+  }
+  if (!features.camera.wellFormed()) {
+    throw InvalidInput("keyframe camera intrinsics need positive fx, fy and finite cx, cy (or all zero: unknown)");
   }
   checkId(id);
   if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
@@ -204,7 +212,7 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
   result.stats.near_past_keyframes = query.near_past;
 
   result.query_index = static_cast<KeyframeIndex>(records_.size());
-  records_.push_back(KeyframeRecord{result.query_id, stamp, 0, std::move(features.keypoints)});
+  records_.push_back(KeyframeRecord{result.query_id, stamp, 0, std::move(features.keypoints), features.camera});
   index_of_id_.emplace(result.query_id, result.query_index);
   next_id_ = std::max(next_id_, result.query_id + 1);
 
@@ -215,7 +223,8 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
 
   if (verifier_ && !result.candidates.empty()) {
     start = Clock::now();
-    const Features query_features = this->features(result.query_index);
+    Features query_features = this->features(result.query_index);
+    query_features.depths = std::move(features.depths);  // only the query's are needed (PnP), so none are stored
     for (LoopCandidate& c : result.candidates)
       c.verification = verifier_->verify(query_features, this->features(c.index));
     result.stats.verify_ms = msSince(start);

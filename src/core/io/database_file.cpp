@@ -102,6 +102,10 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
     w.put(r.id);
     w.put(r.stamp);
     w.put(r.session);
+    w.put(r.camera.fx);
+    w.put(r.camera.fy);
+    w.put(r.camera.cx);
+    w.put(r.camera.cy);
     w.put(static_cast<uint32_t>(r.keypoints.size()));
     for (const cv::KeyPoint& p : r.keypoints) {
       w.put(p.pt.x);
@@ -309,7 +313,7 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   (void)header_crc;
   (void)payload_crc;
 #endif
-  if (version != kDatabaseFormatVersion && version != 1) {
+  if (version < 1 || version > kDatabaseFormatVersion) {
     throw InvalidInput(origin + ": database format version " + std::to_string(version) +
                        "; this mild_lcd reads versions 1 to " + std::to_string(kDatabaseFormatVersion));
   }
@@ -339,7 +343,8 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   }
   state.next_id = in.get<uint64_t>("the next id");
   state.session_start = in.get<uint32_t>("the session start");
-  const size_t keyframes = in.count(8 + 8 + 4 + (version >= 2 ? 4 : 0), "the keyframe count");
+  const size_t record_bytes = 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0);
+  const size_t keyframes = in.count(record_bytes, "the keyframe count");
   state.records.resize(keyframes);
   state.descriptors.resize(keyframes);
   for (size_t k = 0; k < keyframes; ++k) {
@@ -347,6 +352,15 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
     r.id = in.get<uint64_t>("a keyframe id");
     r.stamp = in.get<double>("a keyframe stamp");
     if (version >= 2) r.session = in.get<uint32_t>("a keyframe session");
+    if (version >= 3) {
+      r.camera.fx = in.get<double>("a keyframe's camera");
+      r.camera.fy = in.get<double>("a keyframe's camera");
+      r.camera.cx = in.get<double>("a keyframe's camera");
+      r.camera.cy = in.get<double>("a keyframe's camera");
+      if (!r.camera.wellFormed()) {
+        throw InvalidInput(origin + ": corrupt: keyframe " + std::to_string(r.id) + " has malformed camera intrinsics");
+      }
+    }
     const size_t features = in.count(kKeypointBytes + kDescriptorBytes, "a keyframe's feature count");
     r.keypoints.resize(features);
     for (cv::KeyPoint& p : r.keypoints) {

@@ -30,6 +30,9 @@ void VerificationParams::validate() const {
       !(fy > 0.0 && std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy))) {
     throw InvalidInput("verification/fx, fy must both be positive (and cx, cy finite) to use the essential matrix");
   }
+  if (!(pnp_threshold > 0.0) || !std::isfinite(pnp_threshold)) {
+    throw InvalidInput("verification/pnp_threshold must be a positive number of pixels");
+  }
 }
 
 GeometricVerifier::GeometricVerifier(const VerificationParams& params)
@@ -44,11 +47,52 @@ GeometricCheck GeometricVerifier::check(const Features& query, const Features& c
       candidate.keypoints.size() != candidate.descriptors.size()) {
     throw InvalidInput("geometric verification needs one keypoint per descriptor");
   }
-  return fit(query.keypoints, candidate.keypoints, matcher_.match(query.descriptors, candidate.descriptors));
+  return fit(query, candidate, matcher_.match(query.descriptors, candidate.descriptors));
+}
+
+GeometricCheck GeometricVerifier::fit(const Features& query, const Features& train,
+                                      std::vector<FeatureMatch> matches) const {
+  if (!query.camera.wellFormed() || !train.camera.wellFormed()) {
+    throw InvalidInput("camera intrinsics need positive fx, fy and finite cx, cy (or all zero: unknown)");
+  }
+  if (!query.depths.empty() && query.depths.size() != query.keypoints.size()) {
+    throw InvalidInput("query has " + std::to_string(query.depths.size()) + " depths for " +
+                       std::to_string(query.keypoints.size()) + " keypoints (give one per keypoint, or none)");
+  }
+  // A keyframe's own intrinsics first; then the configured ones; then the other view's (one camera).
+  const CameraIntrinsics configured = params_.intrinsics();
+  const auto resolve = [&](const CameraIntrinsics& own, const CameraIntrinsics& other) {
+    return own.known() ? own : configured.known() ? configured : other;
+  };
+  return fitViews(query.keypoints, train.keypoints, resolve(query.camera, train.camera),
+                  resolve(train.camera, query.camera), query.depths, std::move(matches));
 }
 
 GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
                                       std::vector<FeatureMatch> matches) const {
+  const CameraIntrinsics configured = params_.intrinsics();
+  return fitViews(query, train, configured, configured, {}, std::move(matches));
+}
+
+namespace {
+
+std::vector<cv::Point2f> normalised(const std::vector<cv::Point2f>& points, const CameraIntrinsics& camera) {
+  std::vector<cv::Point2f> out;
+  out.reserve(points.size());
+  for (const cv::Point2f& p : points) {
+    out.emplace_back(static_cast<float>((p.x - camera.cx) / camera.fx), static_cast<float>((p.y - camera.cy) / camera.fy));
+  }
+  return out;
+}
+
+}  // namespace
+
+GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& query,
+                                           const std::vector<cv::KeyPoint>& train,
+                                           const CameraIntrinsics& query_camera,
+                                           const CameraIntrinsics& train_camera,
+                                           const std::vector<float>& query_depths,
+                                           std::vector<FeatureMatch> matches) const {
   GeometricCheck out;
   out.verification.attempted = true;
   out.verification.matches = static_cast<int>(matches.size());
@@ -68,11 +112,19 @@ GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, co
     p1.push_back(query[m.query].pt);
     p2.push_back(train[m.train].pt);
   }
+  const bool essential = query_camera.known() && train_camera.known();
+  // Two different cameras (e.g. two robots): fit E to normalised image coordinates, with the
+  // threshold scaled as OpenCV does for one camera (by the mean focal length).
+  const bool two_cameras = essential && query_camera != train_camera;
+  const double mean_focal = (query_camera.fx + query_camera.fy + train_camera.fx + train_camera.fy) / 4.0;
   cv::Mat mask;
   try {
-    if (params_.usesIntrinsics()) {
-      const cv::Matx33d k(params_.fx, 0, params_.cx, 0, params_.fy, params_.cy, 0, 0, 1);
-      out.model = cv::findEssentialMat(p1, p2, k, cv::USAC_MAGSAC, params_.confidence, params_.ransac_threshold, mask);
+    if (two_cameras) {
+      out.model = cv::findEssentialMat(normalised(p1, query_camera), normalised(p2, train_camera), cv::Matx33d::eye(),
+                                       cv::USAC_MAGSAC, params_.confidence, params_.ransac_threshold / mean_focal, mask);
+    } else if (essential) {
+      out.model = cv::findEssentialMat(p1, p2, query_camera.matrix(), cv::USAC_MAGSAC, params_.confidence,
+                                       params_.ransac_threshold, mask);
     } else {
       out.model = cv::findFundamentalMat(p1, p2, cv::USAC_MAGSAC, params_.ransac_threshold, params_.confidence,
                                          params_.max_iterations, mask);
@@ -87,21 +139,30 @@ GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, co
   out.inlier_mask.assign(mask.begin<uint8_t>(), mask.end<uint8_t>());
   int inliers = 0;
   std::vector<cv::Point2f> q_in, t_in;
+  std::vector<float> depth_in;
   for (size_t i = 0; i < out.inlier_mask.size(); ++i) {
     if (!out.inlier_mask[i]) continue;
     ++inliers;
     out.verification.inlier_matches.push_back(out.matches[i]);
     q_in.push_back(p1[i]);
     t_in.push_back(p2[i]);
+    if (!query_depths.empty()) depth_in.push_back(query_depths[out.matches[i].query]);
   }
   out.verification.coverage = std::min(inlierCoverage(query, q_in), inlierCoverage(train, t_in));
   out.verification.homography_share = homographyShare(q_in, t_in);
   out.verification.inliers = inliers;
   out.verification.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(out.matches.size());
   out.verification.verified = inliers >= params_.min_inliers;
-  if (out.verification.verified && params_.usesIntrinsics()) {
-    const cv::Matx33d k(params_.fx, 0, params_.cx, 0, params_.fy, params_.cy, 0, 0, 1);
-    out.verification.pose = relativePoseFromEssential(out.model, q_in, t_in, k, params_.min_inliers);
+  if (!out.verification.verified || !essential) return out;
+  if (!depth_in.empty()) {
+    out.verification.pose = relativePoseFromDepth(q_in, depth_in, t_in, query_camera.matrix(), train_camera.matrix(),
+                                                  params_.pnp_threshold, params_.min_inliers);
+  }
+  if (!out.verification.pose.valid) {  // no depth, or too little of it: the direction of the baseline
+    out.verification.pose =
+        two_cameras ? relativePoseFromEssential(out.model, normalised(q_in, query_camera),
+                                                normalised(t_in, train_camera), cv::Matx33d::eye(), params_.min_inliers)
+                    : relativePoseFromEssential(out.model, q_in, t_in, query_camera.matrix(), params_.min_inliers);
   }
   return out;
 }

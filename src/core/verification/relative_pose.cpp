@@ -38,6 +38,61 @@ RelativePose relativePoseFromEssential(const cv::Mat& essential, const std::vect
   return pose;
 }
 
+RelativePose relativePoseFromDepth(const std::vector<cv::Point2f>& query_points, const std::vector<float>& depths,
+                                   const std::vector<cv::Point2f>& candidate_points, const cv::Matx33d& query_camera,
+                                   const cv::Matx33d& candidate_camera, double threshold_px, int min_inliers) {
+  RelativePose pose;
+  if (query_points.size() != depths.size() || query_points.size() != candidate_points.size()) return pose;
+  std::vector<cv::Point3d> object;
+  std::vector<cv::Point2d> image;
+  const cv::Matx33d back_project = query_camera.inv();
+  for (size_t i = 0; i < depths.size(); ++i) {
+    const double z = depths[i];
+    if (!(z > 0.0) || !std::isfinite(z)) continue;
+    const cv::Vec3d ray = back_project * cv::Vec3d(query_points[i].x, query_points[i].y, 1.0);
+    object.emplace_back(ray[0] * z / ray[2], ray[1] * z / ray[2], z);
+    image.emplace_back(candidate_points[i].x, candidate_points[i].y);
+  }
+  // EPnP needs 4 points and RANSAC some to spare; a loop edge worth weighting needs min_inliers.
+  if (object.size() < static_cast<size_t>(std::max(min_inliers, 6))) return pose;
+  cv::Mat rvec, tvec;
+  std::vector<int> inliers;
+  try {
+    // X_c = R X_q + t: the query's points in the candidate camera's frame.
+    const bool found = cv::solvePnPRansac(object, image, cv::Mat(candidate_camera), cv::noArray(), rvec, tvec, false,
+                                          200, static_cast<float>(threshold_px), 0.999, inliers, cv::SOLVEPNP_EPNP);
+    if (!found || inliers.size() < static_cast<size_t>(min_inliers)) return pose;
+    std::vector<cv::Point3d> in_object;
+    std::vector<cv::Point2d> in_image;
+    for (int i : inliers) {
+      in_object.push_back(object[i]);
+      in_image.push_back(image[i]);
+    }
+    cv::solvePnPRefineLM(in_object, in_image, cv::Mat(candidate_camera), cv::noArray(), rvec, tvec);
+    std::vector<cv::Point2d> projected;
+    cv::projectPoints(in_object, rvec, tvec, cv::Mat(candidate_camera), cv::noArray(), projected);
+    double sum = 0.0;
+    for (size_t i = 0; i < projected.size(); ++i) {
+      const cv::Point2d e = projected[i] - in_image[i];
+      sum += e.dot(e);
+    }
+    pose.reprojection_error = std::sqrt(sum / static_cast<double>(projected.size()));
+  } catch (const cv::Exception&) {
+    return pose;
+  }
+  cv::Mat r;
+  cv::Rodrigues(rvec, r);
+  const cv::Matx33d r_cq(r);
+  const cv::Vec3d t_cq(tvec);
+  if (!std::isfinite(t_cq[0]) || !std::isfinite(t_cq[1]) || !std::isfinite(t_cq[2])) return pose;
+  pose.rotation = r_cq.t();
+  pose.translation = -(r_cq.t() * t_cq);
+  pose.inliers = static_cast<int>(inliers.size());
+  pose.metric = true;
+  pose.valid = true;
+  return pose;
+}
+
 double rotationAngleDegrees(const cv::Matx33d& a, const cv::Matx33d& b) {
   const cv::Matx33d d = a.t() * b;
   const double c = std::clamp((cv::trace(d) - 1.0) / 2.0, -1.0, 1.0);
