@@ -1,5 +1,6 @@
 #include "mild_lcd/ros/conversions.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -182,11 +183,29 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
   f.descriptors = mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
                                              static_cast<long>(msg.keypoints.size()));
   f.keypoints = keypointsFromMsg(msg.keypoints);
+  f.camera = intrinsicsFromMsg(msg.camera_info);
+  if (!msg.depths.empty() && msg.depths.size() != msg.keypoints.size()) {
+    throw mild::InvalidInput("keyframe has " + std::to_string(msg.depths.size()) + " depths for " +
+                             std::to_string(msg.keypoints.size()) + " keypoints (give one per keypoint, or none)");
+  }
+  f.depths = msg.depths;
   return f;
 }
 
+mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
+  const mild::CameraIntrinsics camera{msg.K[0], msg.K[4], msg.K[2], msg.K[5]};
+  const bool all_zero = std::all_of(msg.K.begin(), msg.K.end(), [](double v) { return v == 0.0; });
+  if (all_zero) return {};
+  if (!camera.known() || !camera.wellFormed()) {
+    throw mild::InvalidInput("camera_info K needs positive fx (K[0]), fy (K[4]) and finite cx (K[2]), cy (K[5]); got " +
+                             std::to_string(camera.fx) + ", " + std::to_string(camera.fy) + ", " +
+                             std::to_string(camera.cx) + ", " + std::to_string(camera.cy) + " (all zero = unknown)");
+  }
+  return camera;
+}
+
 mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
-                                       size_t database_size) {
+                                       size_t database_size, bool correspondences) {
   mild_lcd::LoopClosure msg;
   msg.header = header;
   msg.query_id = result.query_id;
@@ -225,9 +244,24 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
       m.relative_translation.x = pose.translation[0];
       m.relative_translation.y = pose.translation[1];
       m.relative_translation.z = pose.translation[2];
+      m.metric_translation = pose.metric;
       m.pose_inliers = pose.inliers;
+      m.reprojection_error = pose.reprojection_error;
     } else {
       m.relative_rotation.w = 1.0;  // identity, never an invalid all-zero quaternion
+    }
+    if (correspondences && c.verification.verified) {
+      const mild::Verification& v = c.verification;
+      for (const mild::FeatureMatch& match : v.inlier_matches) {
+        m.inlier_query_indices.push_back(match.query);
+        m.inlier_candidate_indices.push_back(match.train);
+      }
+      for (size_t i = 0; i < v.inlier_query_points.size() && i < v.inlier_candidate_points.size(); ++i) {
+        m.inlier_query_pixels.insert(m.inlier_query_pixels.end(),
+                                     {v.inlier_query_points[i].x, v.inlier_query_points[i].y});
+        m.inlier_candidate_pixels.insert(m.inlier_candidate_pixels.end(),
+                                         {v.inlier_candidate_points[i].x, v.inlier_candidate_points[i].y});
+      }
     }
     msg.candidates.push_back(m);
   }

@@ -73,7 +73,8 @@ void KeyframeWorker::process(const KeyframeInput& input) {
     // Only this call changes the detector; it throws before changing anything.
     out.result = out.image.image.empty()
                      ? shared_.detector->process(std::move(features), out.header.stamp.toSec(), id)
-                     : shared_.detector->process(out.image.image, out.image.format, out.header.stamp.toSec());
+                     : shared_.detector->process(out.image.image, out.image.format, out.header.stamp.toSec(),
+                                                 std::nullopt, input.camera);
     out.database_size = shared_.detector->size();
     if (keypoints) {
       out.query_keypoints = shared_.detector->record(out.result.query_index).keypoints;

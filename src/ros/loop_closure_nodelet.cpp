@@ -6,9 +6,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include <cv_bridge/cv_bridge.h>
+#include <image_transport/camera_common.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
@@ -94,11 +96,12 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     diagnostics_ = std::make_unique<DetectorDiagnostics>(nh, pnh, getName(), shared_, *worker_);
     worker_->start();  // loads ~database_path first when ~load_on_start, then keyframes
 
+    if (settings_.use_image_input && settings_.use_camera_info) subscribeCameraInfo(nh);
     if (settings_.use_image_input) subscribeImages(nh, pnh);
     if (settings_.use_keyframe_input) {
       keyframe_sub_ = nh.subscribe<mild_lcd::Keyframe>("keyframe", settings_.queue_size,
                                                        [this](const mild_lcd::KeyframeConstPtr& m) {
-                                                         enqueue({nullptr, nullptr, m});
+                                                         enqueue({nullptr, nullptr, m, {}});
                                                        });
     }
     const mild::DetectorParams& params = shared_.detector->params();
@@ -136,7 +139,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       const std::string topic = nh.resolveName("image") + "/compressed";
       compressed_sub_ = nh.subscribe<sensor_msgs::CompressedImage>(
           topic, settings_.queue_size, [this](const sensor_msgs::CompressedImageConstPtr& m) {
-            enqueue({nullptr, m, nullptr});
+            enqueue({nullptr, m, nullptr, latestCamera()});
           });
       NODELET_INFO("subscribed to %s (compressed images, decoded by mild_lcd)", topic.c_str());
       return;
@@ -144,10 +147,37 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     image_sub_ = transport_->subscribe(
         "image", settings_.queue_size,
         [this](const sensor_msgs::ImageConstPtr& m) {
-          enqueue({m, nullptr, nullptr});
+          enqueue({m, nullptr, nullptr, latestCamera()});
         },
         ros::VoidPtr(), image_transport::TransportHints(settings_.image_transport, ros::TransportHints(), pnh));
     NODELET_INFO("subscribed to %s (transport %s)", image_sub_.getTopic().c_str(), settings_.image_transport.c_str());
+  }
+
+  // camera_info beside `image` (image_transport's naming). Not a synchronised camera subscriber: an
+  // image whose camera_info never comes (many bags and drivers lack one) must still be processed,
+  // and intrinsics rarely change, so each image takes the newest intrinsics received before it.
+  void subscribeCameraInfo(ros::NodeHandle& nh) {
+    const std::string topic = image_transport::getCameraInfoTopic(nh.resolveName("image"));
+    camera_info_sub_ =
+        nh.subscribe<sensor_msgs::CameraInfo>(topic, 1, [this](const sensor_msgs::CameraInfoConstPtr& m) {
+          try {
+            const mild::CameraIntrinsics camera = intrinsicsFromMsg(*m);
+            std::lock_guard<std::mutex> lock(camera_mutex_);
+            if (camera != camera_ && camera.known()) {
+              NODELET_INFO("camera intrinsics from %s: fx %.2f fy %.2f cx %.2f cy %.2f",
+                           camera_info_sub_.getTopic().c_str(), camera.fx, camera.fy, camera.cx, camera.cy);
+            }
+            camera_ = camera;
+          } catch (const mild::InvalidInput& e) {
+            NODELET_WARN_THROTTLE(10.0, "ignored camera_info: %s", e.what());
+          }
+        });
+    NODELET_INFO("subscribed to %s (intrinsics for verified loops' relative pose)", topic.c_str());
+  }
+
+  mild::CameraIntrinsics latestCamera() {
+    std::lock_guard<std::mutex> lock(camera_mutex_);
+    return camera_;
   }
 
   // Callbacks only queue: the nodelet manager's threads are never held up by detection.
@@ -173,7 +203,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   // Runs on the worker thread, without the detector lock.
   void publish(const ProcessedKeyframe& k) {
-    loop_pub_.publish(loopClosureToMsg(k.result, k.header, k.database_size));
+    loop_pub_.publish(loopClosureToMsg(k.result, k.header, k.database_size, settings_.publish_correspondences));
     if (!k.image.image.empty()) debug_cache_->remember(k.result.query_id, k.image.image, k.image.format);
     if (debug_pub_.getNumSubscribers() == 0) return;
     const cv::Mat query = debug_cache_->find(k.result.query_id);
@@ -189,6 +219,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   // 15 s after SIGINT, and a save of 5,000 keyframes takes well under one.
   void shutdown() {
     image_sub_.shutdown();
+    camera_info_sub_.shutdown();
     compressed_sub_.shutdown();
     keyframe_sub_.shutdown();
     if (services_) services_->shutdown();
@@ -222,7 +253,9 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   // Declared before the publishers and subscribers that use its plugins, so destroyed after them.
   std::unique_ptr<image_transport::ImageTransport> transport_;
   image_transport::Subscriber image_sub_;
-  ros::Subscriber compressed_sub_, keyframe_sub_;
+  ros::Subscriber compressed_sub_, keyframe_sub_, camera_info_sub_;
+  std::mutex camera_mutex_;
+  mild::CameraIntrinsics camera_;  // newest from camera_info
   ros::Publisher loop_pub_;
   image_transport::Publisher debug_pub_;
   std::unique_ptr<DetectorServices> services_;

@@ -1,7 +1,8 @@
 // mild_make_bag: writes an image sequence (bench layout) into a rosbag for replay through the
 // nodelet: raw mono8 images, the original compressed bytes (the `compressed` transport), and
 // Keyframe messages with ORB features computed by mild_lcd's extractor (the `keyframe` input).
-// Time stamps come from times.txt (or the frame rate) plus a start offset.
+// Time stamps come from times.txt (or the frame rate) plus a start offset. With --camera, also
+// camera_info beside the images and the intrinsics in each Keyframe.
 
 #include <fstream>
 #include <iostream>
@@ -10,8 +11,10 @@
 #include <CLI/CLI.hpp>
 
 #include <cv_bridge/cv_bridge.h>
+#include <image_transport/camera_common.h>
 #include <ros/time.h>
 #include <rosbag/bag.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/image_encodings.h>
 #include <opencv2/imgcodecs.hpp>
@@ -29,6 +32,7 @@ int main(int argc, char** argv) {
   std::string images, output, image_topic = "/camera/image", keyframe_topic = "/camera/keyframe", frame_id = "camera";
   double start = 1000.0, fps = 10.0;
   long id_offset = 0;
+  std::vector<double> camera;
   app.add_option("--images", images, "sequence folder (frames, or an images/ subfolder)")->required();
   app.add_option("--output", output, "bag file to write")->required();
   app.add_option("--image-topic", image_topic, "raw images; compressed ones go to <topic>/compressed (empty: none)");
@@ -37,10 +41,23 @@ int main(int argc, char** argv) {
   app.add_option("--start", start, "time stamp of the first frame, seconds");
   app.add_option("--fps", fps, "frame rate when the sequence has no times.txt");
   app.add_option("--frame-id", frame_id, "header.frame_id");
+  app.add_option("--camera", camera,
+                 "fx fy cx cy: write sensor_msgs/CameraInfo beside the images (image_transport's camera_info) "
+                 "and into each Keyframe")
+      ->expected(4);
   return mild::tools::toolMain(app, argc, argv, [&] {
     ros::Time::init();
     const mild::tools::ImageSequence seq = mild::tools::openImageSequence(images, fps);
     const mild::OrbExtractor extractor;
+    sensor_msgs::CameraInfo info;
+    if (!camera.empty()) {
+      info.K = {camera[0], 0.0, camera[2], 0.0, camera[1], camera[3], 0.0, 0.0, 1.0};
+      info.P = {camera[0], 0.0, camera[2], 0.0, 0.0, camera[1], camera[3], 0.0, 0.0, 0.0, 1.0, 0.0};
+      info.R = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+      info.distortion_model = "plumb_bob";
+      info.D.assign(5, 0.0);
+      mild_lcd::intrinsicsFromMsg(info);  // refuses what the node would refuse
+    }
     rosbag::Bag bag(output, rosbag::bagmode::Write);
     for (size_t i = 0; i < seq.frames.size(); ++i) {
       const cv::Mat image = cv::imread(seq.frames[i], cv::IMREAD_GRAYSCALE);
@@ -50,6 +67,12 @@ int main(int argc, char** argv) {
       header.stamp = ros::Time(start + seq.stamps[i]);
       header.frame_id = frame_id;
       if (!image_topic.empty()) {
+        if (!camera.empty()) {  // before its image, as a camera driver publishes them
+          info.header = header;
+          info.width = static_cast<uint32_t>(image.cols);
+          info.height = static_cast<uint32_t>(image.rows);
+          bag.write(image_transport::getCameraInfoTopic(image_topic), header.stamp, info);
+        }
         bag.write(image_topic, header.stamp,
                   cv_bridge::CvImage(header, sensor_msgs::image_encodings::MONO8, image).toImageMsg());
         sensor_msgs::CompressedImage compressed;
@@ -69,6 +92,12 @@ int main(int argc, char** argv) {
         kf.keypoints = mild_lcd::keypointsToMsg(f.keypoints);
         const cv::Mat d = mild::descriptorsToMat(f.descriptors);
         kf.descriptors.assign(d.data, d.data + d.total());
+        if (!camera.empty()) {
+          kf.camera_info = info;
+          kf.camera_info.header = header;
+          kf.camera_info.width = static_cast<uint32_t>(image.cols);
+          kf.camera_info.height = static_cast<uint32_t>(image.rows);
+        }
         bag.write(keyframe_topic, header.stamp, kf);
       }
     }

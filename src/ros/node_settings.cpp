@@ -18,6 +18,11 @@ void visitSettings(NodeSettings& s, Visit&& visit) {
   visit("use_image_input", s.use_image_input, "subscribe to `image` (image_transport)");
   visit("use_keyframe_input", s.use_keyframe_input, "subscribe to `keyframe` (mild_lcd/Keyframe features)");
   visit("image_transport", s.image_transport, "transport of `image`: raw, compressed, or any installed plugin");
+  visit("use_camera_info", s.use_camera_info,
+        "with image input, take intrinsics from `camera_info` beside `image` (the newest received; "
+        "verification/fx.. until one arrives)");
+  visit("publish_correspondences", s.publish_correspondences,
+        "add each verified candidate's inlier matches (keypoint indices and pixels) to `loop_closure`");
   visit("queue_size", s.queue_size, "keyframes waiting for the worker; when full the oldest is dropped and counted");
   visit("debug_image_cache", s.debug_image_cache, "keyframes kept at half resolution for `debug_image` (0 = none)");
   visit("debug_image_cache_mb", s.debug_image_cache_mb, "and at most this many megabytes of them");

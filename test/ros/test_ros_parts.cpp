@@ -6,8 +6,10 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include <sensor_msgs/image_encodings.h>
 #include <boost/make_shared.hpp>
@@ -189,10 +191,10 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
   };
   KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
   worker.start();
-  worker.push({image(200, 150, 1.0), nullptr, nullptr});
-  worker.push({image(1, 1, 2.0), nullptr, nullptr});           // thinner than ORB's border: stored, no features
-  worker.push({image(8, 8, 3.0, "32FC1"), nullptr, nullptr});  // unusable encoding
-  worker.push({image(2000, 1000, 4.0), nullptr, nullptr});     // over max_image_pixels
+  worker.push({image(200, 150, 1.0), nullptr, nullptr, {}});
+  worker.push({image(1, 1, 2.0), nullptr, nullptr, {}});           // thinner than ORB's border: stored, no features
+  worker.push({image(8, 8, 3.0, "32FC1"), nullptr, nullptr, {}});  // unusable encoding
+  worker.push({image(2000, 1000, 4.0), nullptr, nullptr, {}});     // over max_image_pixels
   worker.waitIdle();
   const WorkerCounters c = worker.counters();
   EXPECT_EQ(c.processed, 2u) << "the thin image is a keyframe, answered";
@@ -210,7 +212,7 @@ TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
   KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
   worker.start();
-  for (int i = 0; i < 10; ++i) worker.push({image(160, 120, i), nullptr, nullptr});
+  for (int i = 0; i < 10; ++i) worker.push({image(160, 120, i), nullptr, nullptr, {}});
   while (worker.counters().queued > 9) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   std::thread stopper([&] { worker.stop(); });
   while (worker.counters().discarded == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -312,6 +314,71 @@ TEST(Conversions, TheRelativePoseIsPublishedAsAUnitQuaternionAndDirection) {
   EXPECT_EQ(msg.candidates[0].pose_inliers, 42);
   EXPECT_FALSE(msg.candidates[1].has_relative_pose);
   EXPECT_EQ(msg.candidates[1].relative_rotation.w, 1.0) << "identity, not an invalid zero quaternion";
+}
+
+TEST(Conversions, AKeyframesCameraInfoAndDepthsReachTheCore) {
+  mild_lcd::Keyframe msg;
+  msg.keypoints.resize(2);
+  msg.descriptors.assign(2 * mild::kDescriptorBytes, 0x5A);
+  msg.camera_info.K = {256.0, 0.0, 159.5, 0.0, 250.0, 119.5, 0.0, 0.0, 1.0};
+  msg.depths = {1.5f, std::nanf("")};
+  const mild::Features f = featuresFromMsg(msg);
+  EXPECT_EQ(f.camera, (mild::CameraIntrinsics{256.0, 250.0, 159.5, 119.5}));
+  ASSERT_EQ(f.depths.size(), 2u);
+  EXPECT_EQ(f.depths[0], 1.5f);
+
+  msg.depths.push_back(2.0f);  // three depths for two keypoints
+  EXPECT_THROW(featuresFromMsg(msg), mild::InvalidInput);
+  msg.depths.clear();
+  msg.camera_info.K = {};  // all zero: unknown, not an error
+  EXPECT_FALSE(featuresFromMsg(msg).camera.known());
+  msg.camera_info.K = {0.0, 0.0, 159.5, 0.0, 250.0, 119.5, 0.0, 0.0, 1.0};  // fx missing
+  EXPECT_THROW(featuresFromMsg(msg), mild::InvalidInput);
+  sensor_msgs::CameraInfo info;
+  info.K = {256.0, 0.0, std::numeric_limits<double>::infinity(), 0.0, 256.0, 119.5, 0.0, 0.0, 1.0};
+  EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput);
+}
+
+TEST(Conversions, MetricPosesAndCorrespondencesArePublishedWhenAskedFor) {
+  mild::DetectionResult result;
+  mild::LoopCandidate c;
+  c.verification.verified = true;
+  c.verification.inliers = 2;
+  c.verification.inlier_matches = {{3, 7, 10}, {4, 9, 12}};
+  c.verification.inlier_query_points = {{1.0f, 2.0f}, {3.0f, 4.0f}};
+  c.verification.inlier_candidate_points = {{5.0f, 6.0f}, {7.0f, 8.0f}};
+  c.verification.pose.valid = true;
+  c.verification.pose.metric = true;
+  c.verification.pose.translation = cv::Vec3d(0.5, 0.0, 1.25);
+  c.verification.pose.reprojection_error = 0.75;
+  result.candidates = {c};
+  const LoopClosure plain = loopClosureToMsg(result, std_msgs::Header(), 10);
+  EXPECT_TRUE(plain.candidates[0].inlier_query_indices.empty()) << "only with ~publish_correspondences";
+  EXPECT_TRUE(plain.candidates[0].metric_translation);
+  EXPECT_DOUBLE_EQ(plain.candidates[0].relative_translation.z, 1.25);
+  EXPECT_DOUBLE_EQ(plain.candidates[0].reprojection_error, 0.75);
+  const LoopClosure full = loopClosureToMsg(result, std_msgs::Header(), 10, true);
+  const auto& m = full.candidates[0];
+  EXPECT_EQ(m.inlier_query_indices, (std::vector<int32_t>{3, 4}));
+  EXPECT_EQ(m.inlier_candidate_indices, (std::vector<int32_t>{7, 9}));
+  EXPECT_EQ(m.inlier_query_pixels, (std::vector<float>{1, 2, 3, 4}));
+  EXPECT_EQ(m.inlier_candidate_pixels, (std::vector<float>{5, 6, 7, 8}));
+}
+
+TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
+  SharedDetector shared;
+  shared.detector = std::make_unique<mild::LoopDetector>();
+  KeyframeWorker::Hooks hooks;
+  hooks.publish = [](const ProcessedKeyframe&) {};
+  KeyframeWorker worker(shared, 10, 1000 * 1000, hooks);
+  worker.start();
+  const mild::CameraIntrinsics camera{300.0, 300.0, 100.0, 75.0};
+  worker.push({image(200, 150, 1.0), nullptr, nullptr, camera});
+  worker.push({image(200, 150, 2.0), nullptr, nullptr, {}});
+  worker.waitIdle();
+  ASSERT_EQ(shared.detector->size(), 2u);
+  EXPECT_EQ(shared.detector->record(0).camera, camera);
+  EXPECT_FALSE(shared.detector->record(1).camera.known());
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <std_msgs/Header.h>
@@ -46,12 +47,18 @@ ros::Time stampOf(double seconds);
 std::vector<cv::KeyPoint> keypointsFromMsg(const std::vector<mild_lcd::KeyPoint>& msg);
 std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& keypoints);
 
-// Keypoints and descriptors of a Keyframe message (32 bytes of descriptor per keypoint).
+// Keypoints and descriptors of a Keyframe message (32 bytes of descriptor per keypoint), with its
+// optional intrinsics and depths.
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 
+// fx, fy, cx, cy from a CameraInfo's K; unknown when K is all zero. Throws InvalidInput for a K
+// that is neither (a zero or negative focal length beside other values, values not finite).
+mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg);
+
 // The answer published for one processed keyframe (candidate stamps come from the candidates).
+// With `correspondences`, verified candidates carry their inlier matches.
 mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
-                                       size_t database_size);
+                                       size_t database_size, bool correspondences = false);
 
 // Serves a SparseMatch request. `stored` returns a copy of the features of a keyframe in the
 // database (none for an unknown id), so that the matching itself needs no lock on it. A side with

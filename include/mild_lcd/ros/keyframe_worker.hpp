@@ -24,11 +24,13 @@
 
 namespace mild_lcd {
 
-// One keyframe as it arrived; exactly one pointer is set.
+// One keyframe as it arrived; exactly one pointer is set. `camera`: an image's intrinsics (from
+// camera_info) when known; a Keyframe message carries its own.
 struct KeyframeInput {
   sensor_msgs::ImageConstPtr image;
   sensor_msgs::CompressedImageConstPtr compressed;
   mild_lcd::KeyframeConstPtr keyframe;
+  mild::CameraIntrinsics camera;
 };
 
 // One processed keyframe, for the publishers.

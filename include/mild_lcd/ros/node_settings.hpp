@@ -15,6 +15,8 @@ struct NodeSettings {
   bool use_image_input = true;
   bool use_keyframe_input = true;
   std::string image_transport = "raw";
+  bool use_camera_info = true;
+  bool publish_correspondences = false;
   int queue_size = 100;
   int debug_image_cache = 1000;     // keyframes kept (half resolution, grey) for debug_image
   int debug_image_cache_mb = 64;    // and at most this many megabytes of them

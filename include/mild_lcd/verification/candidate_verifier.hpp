@@ -18,7 +18,8 @@ struct Verification {
   double coverage = 0.0;                     // inlierCoverage, the smaller of the two images' (inlier_layout.hpp)
   double homography_share = 0.0;             // homographyShare of the inliers
   std::vector<FeatureMatch> inlier_matches;  // the matches consistent with the model
-  RelativePose pose;                         // of a verified candidate, when intrinsics are known
+  std::vector<cv::Point2f> inlier_query_points, inlier_candidate_points;  // their pixels, in the same order
+  RelativePose pose;  // of a verified candidate, when intrinsics are known
 };
 
 // The seam between loop detection and geometry: given the query's and a candidate's features,

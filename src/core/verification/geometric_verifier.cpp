@@ -80,7 +80,8 @@ std::vector<cv::Point2f> normalised(const std::vector<cv::Point2f>& points, cons
   std::vector<cv::Point2f> out;
   out.reserve(points.size());
   for (const cv::Point2f& p : points) {
-    out.emplace_back(static_cast<float>((p.x - camera.cx) / camera.fx), static_cast<float>((p.y - camera.cy) / camera.fy));
+    out.emplace_back(static_cast<float>((p.x - camera.cx) / camera.fx),
+                     static_cast<float>((p.y - camera.cy) / camera.fy));
   }
   return out;
 }
@@ -88,10 +89,8 @@ std::vector<cv::Point2f> normalised(const std::vector<cv::Point2f>& points, cons
 }  // namespace
 
 GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& query,
-                                           const std::vector<cv::KeyPoint>& train,
-                                           const CameraIntrinsics& query_camera,
-                                           const CameraIntrinsics& train_camera,
-                                           const std::vector<float>& query_depths,
+                                           const std::vector<cv::KeyPoint>& train, const CameraIntrinsics& query_camera,
+                                           const CameraIntrinsics& train_camera, const std::vector<float>& query_depths,
                                            std::vector<FeatureMatch> matches) const {
   GeometricCheck out;
   out.verification.attempted = true;
@@ -120,8 +119,9 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   cv::Mat mask;
   try {
     if (two_cameras) {
-      out.model = cv::findEssentialMat(normalised(p1, query_camera), normalised(p2, train_camera), cv::Matx33d::eye(),
-                                       cv::USAC_MAGSAC, params_.confidence, params_.ransac_threshold / mean_focal, mask);
+      out.model =
+          cv::findEssentialMat(normalised(p1, query_camera), normalised(p2, train_camera), cv::Matx33d::eye(),
+                               cv::USAC_MAGSAC, params_.confidence, params_.ransac_threshold / mean_focal, mask);
     } else if (essential) {
       out.model = cv::findEssentialMat(p1, p2, query_camera.matrix(), cv::USAC_MAGSAC, params_.confidence,
                                        params_.ransac_threshold, mask);
@@ -148,6 +148,8 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
     t_in.push_back(p2[i]);
     if (!query_depths.empty()) depth_in.push_back(query_depths[out.matches[i].query]);
   }
+  out.verification.inlier_query_points = q_in;
+  out.verification.inlier_candidate_points = t_in;
   out.verification.coverage = std::min(inlierCoverage(query, q_in), inlierCoverage(train, t_in));
   out.verification.homography_share = homographyShare(q_in, t_in);
   out.verification.inliers = inliers;
