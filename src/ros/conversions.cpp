@@ -209,6 +209,7 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
   mild_lcd::LoopClosure msg;
   msg.header = header;
   msg.query_id = result.query_id;
+  msg.query_session = result.query_session;
   msg.features = static_cast<int32_t>(result.stats.features);
   msg.database_size = static_cast<int32_t>(database_size);
   msg.extract_ms = result.stats.extract_ms;
@@ -219,6 +220,7 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
   for (const mild::LoopCandidate& c : result.candidates) {
     mild_lcd::LoopCandidate m;
     m.id = c.id;
+    m.session = c.session;
     m.stamp = stampOf(c.stamp);
     m.probability = c.probability;
     m.accepted = c.accepted;

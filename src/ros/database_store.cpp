@@ -65,6 +65,15 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
   return report;
 }
 
+mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string& requested) {
+  const mild::ConfinedFile file = resolve(requested, false);
+  mild::DetectorState state = mild::readDetectorFile(file, max_bytes_);
+  std::lock_guard<std::mutex> lock(shared.mutex);
+  // Merging into the empty map of a failed start-up would save over the map that failed: refused.
+  if (!shared.failure.empty()) throw mild::InvalidInput(shared.failure + "; load_database without merge replaces it");
+  return mild::mergeState(*shared.detector, std::move(state), file.display());
+}
+
 std::string DatabaseStore::saveOnShutdown(SharedDetector& shared) {
   if (!save_on_shutdown_) return "";
   if (!saves_allowed_) return "not saving on shutdown: the map failed to load at start-up and is left as it was";

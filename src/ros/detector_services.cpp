@@ -86,9 +86,16 @@ bool DetectorServices::save(mild_lcd::SaveDatabase::Request& request, mild_lcd::
 
 bool DetectorServices::load(mild_lcd::LoadDatabase::Request& request, mild_lcd::LoadDatabase::Response& response) {
   try {
-    response.message = store_.load(shared_, request.path, request.continue_session).message;
+    if (request.merge && request.continue_session) {
+      throw mild::InvalidInput("merge and continue_session exclude each other: a merged map joins as earlier sessions");
+    }
+    if (request.merge) {
+      response.message = store_.merge(shared_, request.path).message;  // ids stay: the debug cache too
+    } else {
+      response.message = store_.load(shared_, request.path, request.continue_session).message;
+      debug_cache_.clear();
+    }
     response.success = true;
-    debug_cache_.clear();
     ROS_INFO_STREAM_NAMED(log_name_, response.message);
   } catch (const std::exception& e) {  // std::bad_alloc included: the database is as it was
     response.success = false;

@@ -43,7 +43,8 @@ class CameraInfo : public ::testing::Test {
   static void expectPosesOnTrueLoops(const std::vector<mild_lcd::LoopClosure>& msgs, int id_offset,
                                      bool correspondences) {
     ASSERT_EQ(msgs.size(), kFixtureFrames);
-    const mild::GroundTruth truth = mild::loadGroundTruth(std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5/gt_loops.txt");
+    const mild::GroundTruth truth =
+        mild::loadGroundTruth(std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5/gt_loops.txt");
     const std::vector<mild::PlanarPose> poses = mild::loadPlanarPoses(kSampleDir + "/poses.txt");
     std::vector<double> rotation, direction;
     size_t verified = 0, posed = 0;

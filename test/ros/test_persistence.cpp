@@ -157,6 +157,62 @@ TEST(Persistence, SaveResetLoadAndDetectLoopsAgainstTheLoadedMap) {
   }
 }
 
+// load_database with merge: another robot's map (the first lap, under ids of its own) joins the
+// running map, and the running session's revisit closes loops into it.
+TEST(Persistence, MergeAddsASavedMapToTheRunningOne) {
+  std_srvs::Trigger reset;
+  ASSERT_TRUE(ros::service::call("reset", reset));
+  ASSERT_EQ(feed(0, 47).size(), 47u);
+  mild_lcd::SaveDatabase::Request save;
+  save.path = "lap.mild";
+  ASSERT_TRUE(call<mild_lcd::SaveDatabase>("save_database", save).response.success);
+  // The same lap as another robot would have saved it: ids 1000.., its own session numbering.
+  mild::DetectorState state = mild::readDetectorFile((scratch() / "lap.mild").string());
+  for (auto& r : state.records) r.id += 1000;
+  state.next_id += 1000;
+  mild::LoopDetector other;
+  other.restore(std::move(state), false);
+  mild::saveDetector(other, (scratch() / "other_robot.mild").string());
+
+  ASSERT_TRUE(ros::service::call("reset", reset));
+  ASSERT_EQ(feed(0, 20).size(), 20u);  // ids 0..19: the running session
+  mild_lcd::LoadDatabase::Request load;
+  load.path = "lap.mild";  // ids 0..46 again
+  load.merge = true;
+  const auto clash = call<mild_lcd::LoadDatabase>("load_database", load);
+  EXPECT_FALSE(clash.response.success);
+  EXPECT_NE(clash.response.message.find("is in both maps"), std::string::npos) << clash.response.message;
+  EXPECT_EQ(clash.response.keyframes, 20u);
+  load.continue_session = true;
+  load.path = "other_robot.mild";
+  EXPECT_FALSE(call<mild_lcd::LoadDatabase>("load_database", load).response.success) << "merge excludes continue";
+  load.continue_session = false;
+  const auto merged = call<mild_lcd::LoadDatabase>("load_database", load);
+  ASSERT_TRUE(merged.response.success) << merged.response.message;
+  EXPECT_EQ(merged.response.keyframes, 67u);
+
+  const mild::GroundTruth truth = mild::loadGroundTruth(kFixtureDir + "/gt_loops.txt");
+  const auto revisit = feed(47, 60);
+  ASSERT_EQ(revisit.size(), 13u);
+  std::set<uint64_t> across;
+  for (size_t i = 0; i < revisit.size(); ++i) {
+    EXPECT_EQ(revisit[i].query_id, 1047 + i) << "ids continue above both maps";
+    for (const auto& c : revisit[i].candidates) {
+      if (!c.accepted) continue;
+      const bool merged_map = c.id >= 1000;
+      EXPECT_EQ(c.session != revisit[i].query_session, merged_map) << c.id;
+      const std::pair<int, int> pair(static_cast<int>(47 + i), static_cast<int>(merged_map ? c.id - 1000 : c.id));
+      // The other robot's keyframes are exempt from the temporal exclusion: its view of the very
+      // place the query sees (frame 46 for query 47) is a right answer the ground truth leaves out.
+      const bool same_place = merged_map && pair.first - pair.second < 8;
+      EXPECT_TRUE(truth.right.count(pair) || truth.dont_care.count(pair) || same_place)
+          << pair.first << " -> " << pair.second;
+      if (merged_map && truth.right.count(pair)) across.insert(revisit[i].query_id);
+    }
+  }
+  EXPECT_GE(across.size(), 3u) << "loops into the merged map";
+}
+
 // A node of our own in /session: started with ~load_on_start on the map saved above, fed one
 // keyframe, stopped with SIGINT: ~save_on_shutdown writes the grown map.
 pid_t startNode(const std::string& ns, const std::string& map) {

@@ -52,6 +52,7 @@ struct DetectorParams {
 
 struct LoopCandidate {
   uint64_t id = 0;          // the candidate keyframe's id
+  uint32_t session = 0;     // and its session
   KeyframeIndex index = 0;  // its position in the database
   double stamp = 0.0;
   double probability = 0.0;         // calibrated loop probability (CandidateScorer)
@@ -74,6 +75,7 @@ struct StepStats {
 
 struct DetectionResult {
   uint64_t query_id = 0;
+  uint32_t query_session = 0;
   KeyframeIndex query_index = 0;
   std::vector<LoopCandidate> candidates;  // best first
   std::vector<double> similarity;         // Phi' against every eligible keyframe (by database index)
@@ -108,6 +110,7 @@ struct PreparedRestore {
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
   uint64_t next_id = 0;
   KeyframeIndex session_start = 0;
+  uint32_t session = 0;  // the session new keyframes join
 };
 
 // Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
@@ -149,8 +152,20 @@ class LoopDetector {
   // construction), so it may run without the caller's lock; commitRestore cannot fail.
   PreparedRestore prepareRestore(DetectorState state, bool continue_session) const;
   void commitRestore(PreparedRestore&& prepared);
-  // Keyframes [0, sessionStart()) come from an earlier session and are always eligible.
+  // Adds the keyframes of a saved map (yesterday's, another robot's) to this one, keeping both: they
+  // become earlier sessions (their session numbers shifted above every number in use here), always
+  // eligible as candidates, while the running session goes on. The index is rebuilt (the running
+  // session's keyframes stay last, so the temporal exclusion still reads a prefix) and the filter
+  // restarts from "no loop", as for a new session. Ids must be distinct across the two maps.
+  // Throws InvalidInput, changing nothing, when the state is inconsistent or shares an id.
+  void merge(DetectorState state);
+  PreparedRestore prepareMerge(DetectorState state) const;  // reads this detector: hold its lock
+
+  // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
   KeyframeIndex sessionStart() const { return session_start_; }
+  // The session new keyframes join: 0 at first, above every stored one after a load or merge
+  // (continue_session keeps the saved run's).
+  uint32_t session() const { return session_; }
 
   size_t size() const { return records_.size(); }
   const KeyframeDatabase& database() const { return database_; }
@@ -165,6 +180,9 @@ class LoopDetector {
 
  private:
   void checkId(std::optional<uint64_t> id) const;
+  // Checks `state` and builds its database; session_start and session as given, the filter fresh
+  // or from the state.
+  PreparedRestore build(DetectorState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
   KeyframeIndex eligibleCount(double stamp) const;
   std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief,
                                               const std::vector<double>& similarity) const;
@@ -179,6 +197,7 @@ class LoopDetector {
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
   uint64_t next_id_ = 0;
   KeyframeIndex session_start_ = 0;
+  uint32_t session_ = 0;
 };
 
 }  // namespace mild

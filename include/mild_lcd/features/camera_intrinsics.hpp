@@ -19,9 +19,7 @@ struct CameraIntrinsics {
     return fx > 0.0 && fy > 0.0 && std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy);
   }
   cv::Matx33d matrix() const { return {fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0}; }
-  bool operator==(const CameraIntrinsics& o) const {
-    return fx == o.fx && fy == o.fy && cx == o.cx && cy == o.cy;
-  }
+  bool operator==(const CameraIntrinsics& o) const { return fx == o.fx && fy == o.fy && cx == o.cx && cy == o.cy; }
   bool operator!=(const CameraIntrinsics& o) const { return !(*this == o); }
 };
 

@@ -68,4 +68,12 @@ PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file,
                          unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
 void commitLoad(LoopDetector& detector, PreparedLoad&& prepared);
 
+// LoopDetector::merge of a state read from a file (`origin` names it in errors and the report).
+// The caller holds whatever lock guards the detector: merging reads it and rebuilds its index.
+LoadReport mergeState(LoopDetector& detector, DetectorState state, const std::string& origin);
+// readDetectorFile, then mergeState. On any error the detector is left as it was.
+LoadReport mergeDetector(LoopDetector& detector, const ConfinedFile& file,
+                         unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+LoadReport mergeDetector(LoopDetector& detector, const std::string& path);
+
 }  // namespace mild

@@ -31,6 +31,9 @@ class DatabaseStore {
   // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure.
   std::string save(SharedDetector& shared, const std::string& requested);
   mild::LoadReport load(SharedDetector& shared, const std::string& requested, bool continue_session);
+  // Adds a saved map to the running one (LoopDetector::merge). The file is read without the lock;
+  // the merge itself holds it while the index is rebuilt (keyframes wait in the queue meanwhile).
+  mild::LoadReport merge(SharedDetector& shared, const std::string& requested);
 
   // ~save_on_shutdown, unless a start-up load failed. Returns what happened (empty: nothing to do).
   std::string saveOnShutdown(SharedDetector& shared);

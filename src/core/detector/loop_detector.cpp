@@ -62,18 +62,85 @@ void LoopDetector::reset() {
   index_of_id_.clear();
   next_id_ = 0;
   session_start_ = 0;
+  session_ = 0;
 }
 
 void LoopDetector::restore(DetectorState state, bool continue_session) {
   commitRestore(prepareRestore(std::move(state), continue_session));
 }
 
+namespace {
+
+uint32_t largestSession(const std::vector<KeyframeRecord>& records) {
+  uint32_t largest = 0;
+  for (const KeyframeRecord& r : records) largest = std::max(largest, r.session);
+  return largest;
+}
+
+}  // namespace
+
 PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_session) const {
+  const size_t n = state.records.size();
+  if (state.session_start > n) throw InvalidInput("state's session start lies beyond its keyframes");
+  // Resuming: the saved run's session (that of its newest keyframe, unless it had just begun a new
+  // one). A new session: a number above every stored one.
+  const uint32_t next_session = n == 0 ? 0 : largestSession(state.records) + 1;
+  if (n > 0 && next_session == 0) throw InvalidInput("state uses the largest session number; none is left");
+  if (continue_session) {
+    const uint32_t session = state.session_start < n ? state.records.back().session : next_session;
+    const KeyframeIndex session_start = state.session_start;
+    return build(std::move(state), session_start, session, true);
+  }
+  return build(std::move(state), static_cast<KeyframeIndex>(n), next_session, false);
+}
+
+PreparedRestore LoopDetector::prepareMerge(DetectorState state) const {
+  const size_t added = state.records.size();
+  for (const KeyframeRecord& r : state.records) {
+    if (index_of_id_.count(r.id)) {
+      throw InvalidInput("keyframe id " + std::to_string(r.id) +
+                         " is in both maps: merging needs distinct ids (give each robot or session's Keyframe ids a "
+                         "range of their own)");
+    }
+  }
+  if (state.descriptors.size() != added) {
+    throw InvalidInput("state has " + std::to_string(added) + " keyframes but " +
+                       std::to_string(state.descriptors.size()) + " descriptor lists");
+  }
+  // The merged map's sessions are renumbered above every number in use here.
+  const uint64_t base = static_cast<uint64_t>(std::max(session_, largestSession(records_))) + 1;
+  if (base + largestSession(state.records) > UINT32_MAX) throw InvalidInput("too many sessions to merge");
+  DetectorState combined;
+  combined.next_id = std::max(next_id_, state.next_id);
+  const size_t n = records_.size();
+  combined.records.reserve(n + added);
+  combined.descriptors.reserve(n + added);
+  // Earlier sessions first, then the merged map, then the running session: its keyframes stay last.
+  for (KeyframeIndex k = 0; k < session_start_; ++k) {
+    combined.records.push_back(records_[k]);
+    combined.descriptors.push_back(database_.descriptors(k));
+  }
+  for (size_t k = 0; k < added; ++k) {
+    combined.records.push_back(std::move(state.records[k]));
+    combined.records.back().session = static_cast<uint32_t>(base + combined.records.back().session);
+    combined.descriptors.push_back(std::move(state.descriptors[k]));
+  }
+  for (KeyframeIndex k = session_start_; k < n; ++k) {
+    combined.records.push_back(records_[k]);
+    combined.descriptors.push_back(database_.descriptors(k));
+  }
+  const auto session_start = static_cast<KeyframeIndex>(session_start_ + added);
+  return build(std::move(combined), session_start, session_, false);
+}
+
+void LoopDetector::merge(DetectorState state) { commitRestore(prepareMerge(std::move(state))); }
+
+PreparedRestore LoopDetector::build(DetectorState state, KeyframeIndex session_start, uint32_t session,
+                                    bool load_filter) const {
   const size_t n = state.records.size();
   if (state.descriptors.size() != n)
     throw InvalidInput("state has " + std::to_string(n) + " keyframes but " + std::to_string(state.descriptors.size()) +
                        " descriptor lists");
-  if (state.session_start > n) throw InvalidInput("state's session start lies beyond its keyframes");
   std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
   uint64_t largest_id = 0;
   for (size_t k = 0; k < n; ++k) {
@@ -84,6 +151,7 @@ PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_
     }
     if (!std::isfinite(r.stamp)) throw InvalidInput("keyframe " + std::to_string(r.id) + " has a non-finite stamp");
     if (r.id > kMaxKeyframeId) throw InvalidInput("keyframe id " + std::to_string(r.id) + " is above the largest id");
+    if (!r.camera.wellFormed()) throw InvalidInput("keyframe " + std::to_string(r.id) + " has malformed intrinsics");
     if (!index_of_id.emplace(r.id, static_cast<KeyframeIndex>(k)).second) {
       throw InvalidInput("keyframe id " + std::to_string(r.id) + " appears twice");
     }
@@ -94,7 +162,7 @@ PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_
   KeyframeDatabase database(params_.database);
   database.insertAll(state.descriptors);
   std::unique_ptr<TemporalFilter> filter = makeTemporalFilter(params_.filter);
-  if (continue_session) {
+  if (load_filter) {
     if (state.filter_name != filter->name()) {
       throw InvalidInput("the saved run used filter/type '" + state.filter_name + "', this detector runs '" +
                          filter->name() + "': load it as a new session (continue_session false), or run '" +
@@ -108,7 +176,8 @@ PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_
                          std::move(state.records),
                          std::move(index_of_id),
                          state.next_id,
-                         continue_session ? state.session_start : static_cast<KeyframeIndex>(n)};
+                         session_start,
+                         session};
 }
 
 void LoopDetector::commitRestore(PreparedRestore&& prepared) {
@@ -118,6 +187,7 @@ void LoopDetector::commitRestore(PreparedRestore&& prepared) {
   index_of_id_ = std::move(prepared.index_of_id);
   next_id_ = prepared.next_id;
   session_start_ = prepared.session_start;
+  session_ = prepared.session;
 }
 
 std::optional<KeyframeIndex> LoopDetector::find(uint64_t id) const {
@@ -212,7 +282,8 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
   result.stats.near_past_keyframes = query.near_past;
 
   result.query_index = static_cast<KeyframeIndex>(records_.size());
-  records_.push_back(KeyframeRecord{result.query_id, stamp, 0, std::move(features.keypoints), features.camera});
+  result.query_session = session_;
+  records_.push_back(KeyframeRecord{result.query_id, stamp, session_, std::move(features.keypoints), features.camera});
   index_of_id_.emplace(result.query_id, result.query_index);
   next_id_ = std::max(next_id_, result.query_id + 1);
 
@@ -262,6 +333,7 @@ std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<doub
     LoopCandidate c;
     c.index = j;
     c.id = records_[j].id;
+    c.session = records_[j].session;
     c.stamp = records_[j].stamp;
     c.filter_probability = belief[j];
     c.probability = belief[j];

@@ -510,4 +510,35 @@ LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool co
   return loadDetector(detector, fileAtPath(path), continue_session);
 }
 
+LoadReport mergeState(LoopDetector& detector, DetectorState state, const std::string& origin) {
+  const auto start = std::chrono::steady_clock::now();
+  LoadReport report;
+  report.keyframes = state.records.size();
+  for (const auto& d : state.descriptors) report.features += d.size();
+  const size_t before = detector.size();
+  try {
+    detector.merge(std::move(state));
+  } catch (const InvalidInput& e) {
+    throw InvalidInput(origin + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    throw CapacityError(origin + ": not enough memory to merge " + std::to_string(report.keyframes) + " keyframes");
+  }
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::ostringstream msg;
+  msg.precision(3);
+  msg << "merged " << report.keyframes << " keyframes (" << report.features << " features) from " << origin
+      << " into the running map of " << before << " in " << report.seconds << " s; it now holds " << detector.size()
+      << " keyframes, new ones join session " << detector.session();
+  report.message = msg.str();
+  return report;
+}
+
+LoadReport mergeDetector(LoopDetector& detector, const ConfinedFile& file, unsigned long long max_bytes) {
+  return mergeState(detector, readDetectorFile(file, max_bytes), file.display());
+}
+
+LoadReport mergeDetector(LoopDetector& detector, const std::string& path) {
+  return mergeDetector(detector, fileAtPath(path));
+}
+
 }  // namespace mild
