@@ -19,6 +19,7 @@
 
 #include "detector_diagnostics.hpp"
 #include "detector_services.hpp"
+#include "detector_tuning.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/ros/conversions.hpp"
@@ -94,6 +95,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     services_ = std::make_unique<DetectorServices>(nh, getName(), shared_, *store_, *worker_, *debug_cache_,
                                                    static_cast<size_t>(settings_.max_match_features));
     diagnostics_ = std::make_unique<DetectorDiagnostics>(nh, pnh, getName(), shared_, *worker_);
+    tuning_ = std::make_unique<DetectorTuning>(pnh, getName(), shared_);
     worker_->start();  // loads ~database_path first when ~load_on_start, then keyframes
 
     if (settings_.use_image_input && settings_.use_camera_info) subscribeCameraInfo(nh);
@@ -222,6 +224,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     camera_info_sub_.shutdown();
     compressed_sub_.shutdown();
     keyframe_sub_.shutdown();
+    tuning_.reset();
     if (services_) services_->shutdown();
     if (worker_) {
       const size_t waiting = worker_->counters().queued;
@@ -260,6 +263,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   image_transport::Publisher debug_pub_;
   std::unique_ptr<DetectorServices> services_;
   std::unique_ptr<DetectorDiagnostics> diagnostics_;
+  std::unique_ptr<DetectorTuning> tuning_;
 };
 
 }  // namespace mild_lcd

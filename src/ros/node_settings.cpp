@@ -127,6 +127,12 @@ void rejectUnknownParameters(const mild::ParameterSource& source) {
   visitSettings(scratch, [&](const char* name, auto&, const char*) { known.emplace_back(name); });
   // Read by libraries the node uses, from the same private namespace.
   known.emplace_back("diagnostic_period");
+  // Written by the node's own dynamic_reconfigure server (~tuning): the runtime parameters, each
+  // with its first '/' as '_'.
+  for (std::string name : mild::runtimeParameterNames()) {
+    name[name.find('/')] = '_';
+    known.push_back("tuning/" + name);
+  }
   const auto& sections = mild::detectorParameterNamespaces();
   for (const std::string& name : source.names()) {
     if (std::find(known.begin(), known.end(), name) != known.end()) continue;

@@ -291,6 +291,51 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
   EXPECT_GT(seen->cameras.size(), 0u);
 }
 
+TEST(LoopDetector, RetunesWhatIsSafeWhileRunningAndRefusesTheRest) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  LoopDetector detector(fixtureParams());
+  for (size_t i = 0; i < 50; ++i) detector.process(frames[i], PixelFormat::kGray, 0.5 * i);
+
+  DetectorParams fewer = detector.params();
+  fewer.candidates.max_candidates = 1;
+  fewer.scoring.decision_probability = 0.99;
+  detector.retune(fewer);
+  EXPECT_EQ(detector.params().candidates.max_candidates, 1);
+  for (size_t i = 50; i < 60; ++i) {
+    const DetectionResult r = detector.process(frames[i], PixelFormat::kGray, 0.5 * i);
+    EXPECT_LE(r.candidates.size(), 1u);
+    for (const LoopCandidate& c : r.candidates) EXPECT_EQ(c.accepted, c.verification.verified && c.probability >= 0.99);
+  }
+
+  DetectorParams index = detector.params();
+  index.database.index.num_tables = 20;
+  try {
+    detector.retune(index);
+    FAIL() << "the index changed while running";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("index/num_tables cannot change while running"), std::string::npos)
+        << e.what();
+  }
+  DetectorParams invalid = detector.params();
+  invalid.candidates.max_candidates = 0;
+  EXPECT_THROW(detector.retune(invalid), InvalidInput);
+  EXPECT_EQ(detector.params().candidates.max_candidates, 1) << "a refused retune changes nothing";
+  EXPECT_EQ(detector.params().database.index.num_tables, 16);
+
+  // A verifier installed by the caller survives a change of the verification parameters.
+  auto verifier = std::make_unique<CountingVerifier>();
+  const CountingVerifier* seen = verifier.get();
+  detector.setVerifier(std::move(verifier));
+  DetectorParams looser = detector.params();
+  looser.verification.min_inliers = 12;
+  looser.verification.matching.ratio = 0.9;
+  detector.retune(looser);
+  EXPECT_EQ(detector.params().verification.min_inliers, 12);
+  const int before = seen->calls;
+  detector.process(frames[50], PixelFormat::kGray, 40.0);
+  EXPECT_GT(seen->calls, before) << "the installed verifier was replaced";
+}
+
 TEST(LoopDetector, ResetForgetsEverything) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());

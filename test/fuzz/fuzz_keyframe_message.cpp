@@ -43,6 +43,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const size_t n = in.ConsumeIntegralInRange<size_t>(0, 64);
       for (size_t i = 0; i < n; ++i) msg.keypoints.push_back(keypoint(in));
       msg.descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 64 * 33));
+      if (in.ConsumeBool()) {  // intrinsics: K[0], K[4], K[2], K[5] any double (zero, negative, NaN, huge)
+        for (size_t k : {0, 4, 2, 5}) msg.camera_info.K[k] = in.ConsumeFloatingPoint<double>();
+      }
+      if (in.ConsumeBool()) {  // depths: one per keypoint, or a wrong count
+        const size_t depths = in.ConsumeBool() ? n : in.ConsumeIntegralInRange<size_t>(0, 70);
+        for (size_t i = 0; i < depths; ++i) msg.depths.push_back(in.ConsumeFloatingPoint<float>());
+      }
       const mild::Features f = mild_lcd::featuresFromMsg(msg);
       std::optional<uint64_t> id;
       if (msg.has_id) id = msg.id;

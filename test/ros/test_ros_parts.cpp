@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <set>
 
 #include <sensor_msgs/image_encodings.h>
 #include <boost/make_shared.hpp>
@@ -22,6 +23,7 @@
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
+#include "mild_lcd/ros/tuning_config.hpp"
 
 namespace fs = std::filesystem;
 
@@ -63,6 +65,45 @@ TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
       std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("load_on_start: true\n"); }).find("database_path"), std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("database_dir: maps\n"); }).find("absolute"), std::string::npos);
+}
+
+// dynamic_reconfigure (cfg/Tuning.cfg) serves exactly the runtime parameters, with the detector's
+// defaults and ranges the detector accepts; its values travel through the parameter registry.
+TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
+  std::set<std::string> cfg, runtime;
+  for (const auto& d : mild_lcd::TuningConfig::__getParamDescriptions__()) cfg.insert(d->name);
+  for (const std::string& name : mild::runtimeParameterNames()) runtime.insert(tuningName(name));
+  EXPECT_EQ(cfg, runtime);
+
+  const mild::DetectorParams defaults;
+  EXPECT_EQ(mild::describeParameters(paramsFromTuning(mild_lcd::TuningConfig::__getDefault__(), defaults)),
+            mild::describeParameters(defaults))
+      << "cfg/Tuning.cfg's defaults differ from the detector's";
+  for (const auto& bound : {mild_lcd::TuningConfig::__getMin__(), mild_lcd::TuningConfig::__getMax__()}) {
+    mild::LoopDetector detector;
+    EXPECT_NO_THROW(detector.retune(paramsFromTuning(bound, defaults))) << "a cfg bound the detector refuses";
+  }
+
+  mild::DetectorParams custom;
+  custom.candidates.max_candidates = 7;
+  custom.scoring.decision_probability = 0.75;
+  const mild_lcd::TuningConfig config = tuningConfigOf(custom);
+  EXPECT_EQ(config.detector_max_candidates, 7);
+  EXPECT_EQ(config.scoring_decision_probability, 0.75);
+  EXPECT_EQ(config.detector_exclusion_frames, custom.candidates.exclusion_frames);
+  EXPECT_EQ(mild::describeParameters(paramsFromTuning(config, mild::DetectorParams{})),
+            mild::describeParameters(custom))
+      << "there and back";
+
+  // What the server writes under ~tuning is known to the start-up check; nothing else there is.
+  EXPECT_EQ(errorOf([] {
+              rejectUnknownParameters(YamlParameterSource::fromString("tuning:\n  detector_max_candidates: 2\n"));
+            }),
+            "");
+  EXPECT_NE(errorOf([] {
+              rejectUnknownParameters(YamlParameterSource::fromString("tuning:\n  index_num_tables: 2\n"));
+            }).find("tuning/index_num_tables"),
+            std::string::npos);
 }
 
 TEST(NodeSettings, TheReadmeTableIsTheDeclaration) {

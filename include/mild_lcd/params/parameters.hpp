@@ -38,6 +38,11 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
 // The namespaces that belong to the detector (a source may hold other names outside them).
 const std::vector<std::string>& detectorParameterNamespaces();
 
+// The parameters a running detector may change (LoopDetector::retune, the node's dynamic_reconfigure):
+// how candidates are chosen, checked and reported. The others shape the stored map (features,
+// index, similarity) or the filter's state and are fixed at start-up.
+const std::vector<std::string>& runtimeParameterNames();
+
 // Flattened "name: value" lines of every parameter, for logs and --print-config.
 std::vector<std::pair<std::string, std::string>> describeParameters(const DetectorParams& p);
 

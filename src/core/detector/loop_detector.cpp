@@ -6,6 +6,7 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/params/parameters.hpp"
 
 namespace mild {
 namespace {
@@ -54,6 +55,30 @@ LoopDetector::LoopDetector(const DetectorParams& params)
 }
 
 LoopDetector::~LoopDetector() = default;
+
+void LoopDetector::retune(const DetectorParams& next) {
+  const auto now = describeParameters(params_);
+  const auto wanted = describeParameters(next);
+  const auto& runtime = runtimeParameterNames();
+  bool verification_changed = false;
+  for (size_t i = 0; i < now.size(); ++i) {
+    if (now[i].second == wanted[i].second) continue;
+    verification_changed |= now[i].first.compare(0, 13, "verification/") == 0;
+    if (std::find(runtime.begin(), runtime.end(), now[i].first) == runtime.end()) {
+      throw InvalidInput(now[i].first + " cannot change while running (it shapes the stored map or the filter): " +
+                         "set it at start-up");
+    }
+  }
+  next.validate();
+  std::unique_ptr<CandidateVerifier> verifier;
+  if (verification_changed && dynamic_cast<const GeometricVerifier*>(verifier_.get()) != nullptr) {
+    verifier = std::make_unique<GeometricVerifier>(next.verification);
+  }
+  params_.candidates = next.candidates;
+  params_.scoring.decision_probability = next.scoring.decision_probability;
+  params_.verification = next.verification;
+  if (verifier) verifier_ = std::move(verifier);
+}
 
 void LoopDetector::reset() {
   database_.clear();

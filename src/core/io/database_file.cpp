@@ -467,7 +467,10 @@ PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file,
   // The index is rebuilt with this detector's parameters; say so when the file's differ.
   const auto saved = parameterLines(state.parameters);
   std::string differing;
-  for (const auto& [name, value] : describeParameters(detector.params())) {
+  // Only the index parameters are read: the others may be retuned meanwhile (LoopDetector::retune).
+  DetectorParams index_only;
+  index_only.database.index = detector.params().database.index;
+  for (const auto& [name, value] : describeParameters(index_only)) {
     if (name.compare(0, 6, "index/") != 0) continue;
     auto it = saved.find(name);
     if (it != saved.end() && it->second != value) {

@@ -98,6 +98,16 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
   return p;
 }
 
+const std::vector<std::string>& runtimeParameterNames() {
+  static const std::vector<std::string> names = {
+      "detector/exclusion_frames",   "detector/exclusion_seconds",    "detector/max_candidates",
+      "detector/suppression_radius", "detector/min_probability",      "scoring/decision_probability",
+      "verification/min_inliers",    "verification/ransac_threshold", "verification/ratio",
+      "verification/pnp_threshold",
+  };
+  return names;
+}
+
 std::vector<std::pair<std::string, std::string>> describeParameters(const DetectorParams& params) {
   DetectorParams p = params;
   std::vector<std::pair<std::string, std::string>> out;

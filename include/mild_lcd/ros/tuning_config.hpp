@@ -1,0 +1,25 @@
+#pragma once
+
+// The bridge between dynamic_reconfigure's TuningConfig (cfg/Tuning.cfg) and the detector's
+// parameters: a TuningConfig field is a runtime parameter (runtimeParameterNames()) with its first
+// '/' as '_'. Values travel through the one parameter registry (parameters.hpp), so names, types
+// and validation are the detector's own. No master needed: tested in test_ros_parts.
+
+#include <string>
+
+#include "mild_lcd/TuningConfig.h"
+#include "mild_lcd/detector/loop_detector.hpp"
+
+namespace mild_lcd {
+
+// "detector/max_candidates" <-> "detector_max_candidates".
+std::string tuningName(const std::string& parameter);
+std::string parameterName(const std::string& tuning_name);
+
+// The detector's current values of its runtime parameters.
+mild_lcd::TuningConfig tuningConfigOf(const mild::DetectorParams& params);
+// `current` with the runtime parameters set from `config`. Throws mild::InvalidInput (naming the
+// parameter) for a value the detector refuses.
+mild::DetectorParams paramsFromTuning(const mild_lcd::TuningConfig& config, const mild::DetectorParams& current);
+
+}  // namespace mild_lcd

@@ -1,0 +1,37 @@
+#include "detector_tuning.hpp"
+
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/ros/tuning_config.hpp"
+
+namespace mild_lcd {
+
+DetectorTuning::DetectorTuning(const ros::NodeHandle& pnh, const std::string& log_name, SharedDetector& shared)
+    : log_name_(log_name), shared_(shared), server_(mutex_, ros::NodeHandle(pnh, "tuning")) {
+  {
+    std::lock_guard<std::mutex> lock(shared_.mutex);
+    const mild_lcd::TuningConfig current = tuningConfigOf(shared_.detector->params());
+    server_.updateConfig(current);  // before the callback: it must not start from the cfg's defaults
+  }
+  server_.setCallback([this](mild_lcd::TuningConfig& config, uint32_t level) { apply(config, level); });
+}
+
+void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
+  std::lock_guard<std::mutex> lock(shared_.mutex);
+  mild::LoopDetector& detector = *shared_.detector;
+  try {
+    const mild::DetectorParams next = paramsFromTuning(config, detector.params());
+    if (mild::describeParameters(next) == mild::describeParameters(detector.params())) return;
+    detector.retune(next);
+    ROS_INFO_STREAM_NAMED(log_name_, "retuned: max_candidates " << next.candidates.max_candidates << ", exclusion "
+                                                                << next.candidates.exclusion_frames
+                                                                << " keyframes, decision probability "
+                                                                << next.scoring.decision_probability << ", min_inliers "
+                                                                << next.verification.min_inliers);
+  } catch (const mild::InvalidInput& e) {
+    ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure change refused, values kept: " << e.what());
+    config = tuningConfigOf(detector.params());  // the server answers and publishes what holds
+  }
+}
+
+}  // namespace mild_lcd

@@ -1,0 +1,75 @@
+// rostest (nodelet_tuning.test): live tuning through dynamic_reconfigure's own service, against a
+// nodelet started from the fixture's YAML, then a replay of the fixture bag under the new values.
+
+#include <gtest/gtest.h>
+
+#include <dynamic_reconfigure/Reconfigure.h>
+#include <ros/ros.h>
+
+#include "mild_lcd/LoopClosure.h"
+#include "ros_test_support.hpp"
+
+namespace mild_lcd::test {
+namespace {
+
+const std::string kBag = std::string(MILD_BAG_DIR) + "/fixture_corridor.bag";
+
+dynamic_reconfigure::Config reconfigure(const dynamic_reconfigure::Config& change) {
+  dynamic_reconfigure::Reconfigure srv;
+  srv.request.config = change;
+  EXPECT_TRUE(ros::service::waitForService("/mild_lcd/tuning/set_parameters", ros::Duration(20.0)));
+  EXPECT_TRUE(ros::service::call("/mild_lcd/tuning/set_parameters", srv));
+  return srv.response.config;
+}
+
+template <class Value>
+Value valueOf(const std::vector<Value>& values, const std::string& name) {
+  for (const Value& v : values)
+    if (v.name == name) return v;
+  ADD_FAILURE() << name << " missing from the configuration";
+  return {};
+}
+
+TEST(Tuning, StartsFromTheNodesValuesAndAppliesChangesBetweenKeyframes) {
+  // The YAML's exclusion (8 fixture keyframes), not the cfg's default (40).
+  ASSERT_TRUE(ros::service::waitForService("/mild_lcd/tuning/set_parameters", ros::Duration(20.0)));
+  int exclusion = 0;
+  EXPECT_TRUE(ros::param::get("/mild_lcd/tuning/detector_exclusion_frames", exclusion));
+  EXPECT_EQ(exclusion, 8);
+
+  dynamic_reconfigure::Config change;
+  dynamic_reconfigure::IntParameter candidates;
+  candidates.name = "detector_max_candidates";
+  candidates.value = 1;
+  change.ints.push_back(candidates);
+  dynamic_reconfigure::DoubleParameter decision;
+  decision.name = "scoring_decision_probability";
+  decision.value = 0.9;
+  change.doubles.push_back(decision);
+  const dynamic_reconfigure::Config now = reconfigure(change);
+  EXPECT_EQ(valueOf(now.ints, "detector_max_candidates").value, 1);
+  EXPECT_EQ(valueOf(now.doubles, "scoring_decision_probability").value, 0.9);
+  EXPECT_EQ(valueOf(now.ints, "detector_exclusion_frames").value, 8) << "what was not named stays";
+
+  // Out of range: dynamic_reconfigure keeps it within the cfg's bounds, which the detector accepts.
+  change.doubles.clear();
+  change.ints[0].value = 0;
+  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 1);
+
+  TopicLog<mild_lcd::LoopClosure> outputs("/loop_closure");
+  ASSERT_TRUE(outputs.waitForPublisher(20.0));
+  ASSERT_EQ(playBag(kBag, "/camera/keyframe", "-r 4"), 0);
+  ASSERT_TRUE(outputs.waitForCount(60, 120.0));
+  size_t accepted = 0;
+  for (const auto& msg : outputs.messages()) {
+    EXPECT_LE(msg.candidates.size(), 1u) << "keyframe " << msg.query_id;
+    for (const auto& c : msg.candidates) {
+      EXPECT_EQ(c.accepted, c.verified && c.probability >= 0.9) << "keyframe " << msg.query_id;
+      accepted += c.accepted ? 1 : 0;
+    }
+  }
+  EXPECT_GT(accepted, 0u) << "the revisit still closes loops";
+}
+
+}  // namespace
+}  // namespace mild_lcd::test
