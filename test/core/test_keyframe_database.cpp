@@ -215,6 +215,37 @@ TEST(KeyframeDatabase, EarlyTerminationAtOrAboveD0IsBitIdentical) {
   EXPECT_EQ(r_aggr.stats.full_distances + r_aggr.stats.early_rejections, r_aggr.stats.candidates_visited);
 }
 
+// inline_prefixes changes where early termination reads the first 64 bits, nothing else: the same
+// similarity bit for bit and the same work, through merges of recent entries and bounded buckets.
+TEST(KeyframeDatabase, InlinePrefixesGiveIdenticalResults) {
+  for (uint32_t bound : {0u, 6u}) {
+    std::mt19937_64 rng(43);
+    const Scene s = makeScene(rng, 200, 60);
+    DatabaseParams p = paramsWith(16, bound == 0 ? 1 : 0);
+    p.index.max_bucket_entries = bound;
+    KeyframeDatabase reference(p);
+    p.index.inline_prefixes = true;
+    KeyframeDatabase inlined(p);
+    for (size_t k = 0; k < s.keyframes.size(); ++k) {
+      reference.insert(s.keyframes[k]);
+      inlined.insert(s.keyframes[k]);
+      if (k % 25 != 24) continue;
+      const QueryResult a = reference.query(s.query), b = inlined.query(s.query);
+      EXPECT_EQ(a.similarity, b.similarity) << "after keyframe " << k << ", bound " << bound;
+      EXPECT_EQ(a.stats.candidates_visited, b.stats.candidates_visited);
+      EXPECT_EQ(a.stats.early_rejections, b.stats.early_rejections);
+      EXPECT_EQ(a.stats.full_distances, b.stats.full_distances);
+    }
+    // 12,000 entries per table: merged at least twice (a merge waits for 4,096 recent ones).
+    if (bound > 0) {
+      EXPECT_GT(inlined.index().evictedEntries(), 0u) << "the bound evicted nothing";
+    }
+    EXPECT_EQ(inlined.index().entryCount(), reference.index().entryCount());
+    EXPECT_GT(inlined.memoryBytes(), reference.memoryBytes() + 4 * reference.index().entryCount())
+        << "8 bytes per settled entry";
+  }
+}
+
 TEST(KeyframeDatabase, HoldsMoreThan65535KeyframesWithoutWrapAround) {
   std::mt19937_64 rng(51);
   DatabaseParams p;

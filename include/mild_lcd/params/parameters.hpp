@@ -90,6 +90,7 @@ void visitParameters(DetectorParams& p, Visit&& visit) {
   visit("index/cap_buckets", p.database.index.cap_buckets);
   visit("index/bucket_cap_factor", p.database.index.bucket_cap_factor);
   visit("index/expected_features", p.database.index.expected_features);
+  visit("index/inline_prefixes", p.database.index.inline_prefixes);
   visit("index/min_bucket_cap", p.database.index.min_bucket_cap);
   visit("index/max_bucket_entries", p.database.index.max_bucket_entries);
 

@@ -129,7 +129,7 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
         ++discarded_buckets_;
         continue;
       }
-      table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s});
+      table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s, descriptors[i].words[0]});
       slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
       if (params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries &&
           slot.offset < table.slots[s + 1].offset) {
@@ -184,13 +184,19 @@ void MihIndex::merge(Table& table) {
     }
     start[s + 1] = start[s] + settled + recent_in[s] - (bound > 0 ? skip_recent[s] : 0);
   }
+  const bool prefixes = params_.inline_prefixes;
   std::vector<FeatureId> ids(start[slots]);
+  std::vector<uint64_t> heads(prefixes ? start[slots] : 0);
   for (size_t s = 0; s < slots; ++s) {  // settled runs first, then room for the recent ones
     Slot& slot = table.slots[s];
     if (slot.recent != kDiscarded) {
       const FeatureId* run = table.ids.data() + slot.offset;
       const uint32_t settled = table.slots[s + 1].offset - slot.offset;
       std::copy(run, run + settled, ids.begin() + start[s]);
+      if (prefixes) {
+        const uint64_t* from = table.prefixes.data() + slot.offset;
+        std::copy(from, from + settled, heads.begin() + start[s]);
+      }
       slot.offset = start[s] + settled;  // the write cursor for its recent entries, for now
     } else {
       slot.offset = start[s];
@@ -203,6 +209,7 @@ void MihIndex::merge(Table& table) {
       --skip_recent[link.slot];
       continue;
     }
+    if (prefixes) heads[slot.offset] = link.prefix;
     ids[slot.offset++] = link.id;
   }
   for (size_t s = 0; s < slots; ++s) {
@@ -215,6 +222,7 @@ void MihIndex::merge(Table& table) {
   }
   table.slots[slots].offset = start[slots];
   table.ids = std::move(ids);
+  table.prefixes = std::move(heads);
   table.recent.clear();
   if (table.recent.capacity() > 2 * mergeThreshold(table)) {  // after a bulk load: give the room back
     std::vector<Link>().swap(table.recent);
@@ -229,7 +237,7 @@ size_t MihIndex::memoryBytes() const {
   size_t bytes = sizeof(*this);
   for (const Table& table : tables_) {
     bytes += sizeof(Table) + table.slots.capacity() * sizeof(Slot) + table.ids.capacity() * sizeof(FeatureId) +
-             table.recent.capacity() * sizeof(Link);
+             table.prefixes.capacity() * sizeof(uint64_t) + table.recent.capacity() * sizeof(Link);
     // unordered_map nodes: key, value, next pointer and cached hash, plus one bucket pointer each
     bytes += table.slot_of.size() * (sizeof(uint64_t) + sizeof(uint32_t) + 2 * sizeof(void*)) +
              table.slot_of.bucket_count() * sizeof(void*);

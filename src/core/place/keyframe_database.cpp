@@ -238,23 +238,34 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
       }
     } else {
       ProbeCounters counters;
-      candidates.clear();
-      index_.gather(f, id_limit, counters, candidates);
-      // Candidates are scattered over the whole database, so each check waits for memory. Two
-      // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
-      // requested while one is checked, then the rest of the survivors likewise.
-      constexpr size_t kAhead = 16;
-      const size_t n_candidates = candidates.size();
       survivors.clear();
-      for (size_t c = 0; c < n_candidates; ++c) {
-        if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
-        const FeatureId id = candidates[c];
-        const int partial = popcount64(f.words[0] ^ heads_[id]);
-        if (partial > tp) continue;
-        survivors.push_back({id, partial});
+      size_t n_candidates = 0;
+      if (index_.params().inline_prefixes) {
+        // The first 64 bits sit beside each id in its bucket: one sequential pass, no random reads.
+        index_.probeWithPrefixes(f, id_limit, counters, [&](FeatureId id, uint64_t prefix) {
+          const int partial = popcount64(f.words[0] ^ prefix);
+          if (partial <= tp) survivors.push_back({id, partial});
+        });
+        n_candidates = counters.entries_visited;
+      } else {
+        candidates.clear();
+        index_.gather(f, id_limit, counters, candidates);
+        // Candidates are scattered over the whole database, so each check waits for memory. Two
+        // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
+        // requested while one is checked, then the rest of the survivors likewise.
+        constexpr size_t kAhead = 16;
+        n_candidates = candidates.size();
+        for (size_t c = 0; c < n_candidates; ++c) {
+          if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
+          const FeatureId id = candidates[c];
+          const int partial = popcount64(f.words[0] ^ heads_[id]);
+          if (partial > tp) continue;
+          survivors.push_back({id, partial});
+        }
       }
       stats.early_rejections += n_candidates - survivors.size();
       stats.full_distances += survivors.size();
+      constexpr size_t kAhead = 16;
       for (size_t c = 0; c < survivors.size(); ++c) {
         if (c + kAhead < survivors.size()) __builtin_prefetch(&tails_[survivors[c + kAhead].id]);
         const auto [id, partial] = survivors[c];
