@@ -35,10 +35,13 @@ TEST(MildBenchScale, ReportsEveryColumnPerSize) {
   ASSERT_EQ(out["rows"].size(), 2u);
   for (const auto& row : out["rows"]) {
     for (const char* key : {"keyframes", "mih_ms_median", "mih_et_ms_median", "baseline_2017_ms_median",
-                            "brute_ms_median", "bytes_per_feature", "mih_bounded_ms_median"}) {
+                            "brute_ms_median", "bytes_per_feature", "mih_bounded_ms_median", "default_ms_median",
+                            "faiss_multihash_ms_median", "mih_inline_ms_median", "inline_bytes_per_feature"}) {
       ASSERT_TRUE(row.contains(key)) << key << " in " << row.dump();
     }
     EXPECT_GT(row["bytes_per_feature"].get<double>(), 32.0) << "at least the descriptor";
+    EXPECT_EQ(row["default_ms_median"], row["mih_et_ms_median"]) << "the shipped configuration";
+    EXPECT_GT(row["inline_bytes_per_feature"].get<double>(), row["bytes_per_feature"].get<double>());
     // faiss answers the database's question on the same descriptors: pairs within d0, MIH a subset.
     ASSERT_TRUE(row["faiss_mih_ms_median"].is_number()) << row.dump();
     const auto exact_pairs = row["faiss_exact_pairs_first_query"].get<size_t>();
