@@ -173,6 +173,11 @@ TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
   EXPECT_NE(running.failure.find("left untouched"), std::string::npos) << running.failure;
   EXPECT_NE(store.saveOnShutdown(running).find("not saving"), std::string::npos);
   EXPECT_THROW(store.save(running, ""), mild::InvalidInput) << "nor through the service";
+  // Merging into the empty stand-in would let a later save replace the map that failed.
+  mild::saveDetector(*detector(2), (dir_ / "small.db").string());
+  const std::string merge_error = errorOf([&] { store.merge(running, "small.db"); });
+  EXPECT_NE(merge_error.find("without merge replaces it"), std::string::npos) << merge_error;
+  EXPECT_EQ(running.detector->size(), 0u);
   EXPECT_EQ(fs::file_size(dir_ / "map.db"), size) << "the map is untouched";
   EXPECT_EQ(mild::readDetectorFile((dir_ / "map.db").string()).records.size(), 120u);
 }
