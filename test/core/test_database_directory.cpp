@@ -57,6 +57,8 @@ TEST_F(Confinement, EscapesAreRefused) {
   const DatabaseDirectory dir(root_);
   expectRefused(dir, "../outside/victim.txt", "'..'");
   expectRefused(dir, "site/../../outside/x", "'..'");
+  expectRefused(dir, root_ + "/../outside/x.db", "must not contain '..'");  // absolute: named as such
+  expectRefused(dir, root_ + "/site/..", "must not contain '..'");
   expectRefused(dir, (base_ / "outside" / "x.db").string(), "outside the database folder");
   expectRefused(dir, root_ + "_evil/x.db", "outside the database folder");
   expectRefused(dir, "/etc/passwd", "outside the database folder");

@@ -138,6 +138,9 @@ ConfinedFile DatabaseDirectory::resolve(const std::string& requested, bool creat
   if (requested.size() > kMaxPathBytes) throw InvalidInput("database name longer than 4096 bytes");
   if (requested.find('\0') != std::string::npos) throw InvalidInput("database name contains a NUL byte");
   std::string relative = requested;
+  if ((requested + "/").find("/../") != std::string::npos) {  // before the prefix check, which it would fool
+    throw InvalidInput("database name '" + requested + "' must not contain '..'");
+  }
   if (requested.front() == '/') {
     const std::string prefix = root_ == "/" ? "/" : root_ + "/";
     if (requested.compare(0, prefix.size(), prefix) != 0 || requested.size() == prefix.size()) {
