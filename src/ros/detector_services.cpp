@@ -51,6 +51,14 @@ bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild
     if (!k) return std::nullopt;
     return shared_.detector->features(*k);
   };
+  {
+    // The verification parameters may have been retuned (dynamic_reconfigure) since it was built.
+    std::lock_guard<std::mutex> lock(shared_.mutex);
+    if (shared_.detector->retunes() != verifier_retunes_) {
+      verifier_ = std::make_unique<mild::GeometricVerifier>(alwaysOn(shared_.detector->params().verification));
+      verifier_retunes_ = shared_.detector->retunes();
+    }
+  }
   response = mild_lcd::sparseMatch(request, stored, *verifier_, max_match_features_);
   if (!response.success) ROS_WARN_STREAM_THROTTLE_NAMED(2.0, log_name_, "sparse_match: " << response.message);
   return true;  // failures are reported in the response, not as a failed call

@@ -42,8 +42,9 @@ class DetectorServices {
   DebugImageCache& debug_cache_;
   const size_t max_match_features_;
   // The service thread's own verifier: it checks whatever it is asked, even with loop
-  // verification off.
+  // verification off. Rebuilt after a retune of the detector (LoopDetector::retunes()).
   std::unique_ptr<mild::GeometricVerifier> verifier_;
+  uint64_t verifier_retunes_ = 0;
 
   ros::CallbackQueue queue_;
   ros::NodeHandle nh_;

@@ -7,13 +7,18 @@
 namespace mild_lcd {
 
 DetectorTuning::DetectorTuning(const ros::NodeHandle& pnh, const std::string& log_name, SharedDetector& shared)
-    : log_name_(log_name), shared_(shared), server_(mutex_, ros::NodeHandle(pnh, "tuning")) {
+    : log_name_(log_name), shared_(shared) {
+  // The server advertises set_parameters as it is constructed, with the cfg's defaults and no
+  // callback yet: a request in that window would be answered and then lost. Holding the server's
+  // own mutex until it holds the node's values and its callback makes such a request wait instead.
+  boost::recursive_mutex::scoped_lock ready(mutex_);
+  server_ =
+      std::make_unique<dynamic_reconfigure::Server<mild_lcd::TuningConfig>>(mutex_, ros::NodeHandle(pnh, "tuning"));
   {
     std::lock_guard<std::mutex> lock(shared_.mutex);
-    const mild_lcd::TuningConfig current = tuningConfigOf(shared_.detector->params());
-    server_.updateConfig(current);  // before the callback: it must not start from the cfg's defaults
+    server_->updateConfig(tuningConfigOf(shared_.detector->params()));  // not the cfg's defaults
   }
-  server_.setCallback([this](mild_lcd::TuningConfig& config, uint32_t level) { apply(config, level); });
+  server_->setCallback([this](mild_lcd::TuningConfig& config, uint32_t level) { apply(config, level); });
 }
 
 void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {

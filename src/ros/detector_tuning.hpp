@@ -5,6 +5,7 @@
 // starts from the node's own values (YAML, rosparam), not the cfg's defaults; each change is
 // applied between two keyframes (under the detector lock), a refused one is logged and undone.
 
+#include <memory>
 #include <string>
 
 #include <dynamic_reconfigure/server.h>
@@ -25,8 +26,8 @@ class DetectorTuning {
 
   std::string log_name_;
   SharedDetector& shared_;
-  boost::recursive_mutex mutex_;
-  dynamic_reconfigure::Server<mild_lcd::TuningConfig> server_;
+  boost::recursive_mutex mutex_;  // the server's: held by every request while it is applied
+  std::unique_ptr<dynamic_reconfigure::Server<mild_lcd::TuningConfig>> server_;
 };
 
 }  // namespace mild_lcd

@@ -7,6 +7,7 @@
 #include <ros/ros.h>
 
 #include "mild_lcd/LoopClosure.h"
+#include "mild_lcd/SparseMatch.h"
 #include "ros_test_support.hpp"
 
 namespace mild_lcd::test {
@@ -31,8 +32,9 @@ Value valueOf(const std::vector<Value>& values, const std::string& name) {
 }
 
 TEST(Tuning, StartsFromTheNodesValuesAndAppliesChangesBetweenKeyframes) {
-  // The YAML's exclusion (8 fixture keyframes), not the cfg's default (40).
-  ASSERT_TRUE(ros::service::waitForService("/mild_lcd/tuning/set_parameters", ros::Duration(20.0)));
+  // The YAML's exclusion (8 fixture keyframes), not the cfg's default (40). An empty request is
+  // dynamic_reconfigure's "get": its answer waits until the server holds the node's values.
+  EXPECT_EQ(valueOf(reconfigure({}).ints, "detector_exclusion_frames").value, 8);
   int exclusion = 0;
   EXPECT_TRUE(ros::param::get("/mild_lcd/tuning/detector_exclusion_frames", exclusion));
   EXPECT_EQ(exclusion, 8);
@@ -69,6 +71,24 @@ TEST(Tuning, StartsFromTheNodesValuesAndAppliesChangesBetweenKeyframes) {
     }
   }
   EXPECT_GT(accepted, 0u) << "the revisit still closes loops";
+
+  // The sparse_match service follows a retune of the verification too.
+  mild_lcd::SparseMatch srv;
+  srv.request.query_id = 159;  // fixture keyframes 59 and 9 (ids from 100): a loop
+  srv.request.train_id = 109;
+  ASSERT_TRUE(ros::service::call("/sparse_match", srv));
+  ASSERT_TRUE(srv.response.success) << srv.response.message;
+  EXPECT_TRUE(srv.response.verified);
+  const int inliers = srv.response.inliers;
+  dynamic_reconfigure::Config strict;
+  dynamic_reconfigure::IntParameter min_inliers;
+  min_inliers.name = "verification_min_inliers";
+  min_inliers.value = inliers + 1;
+  strict.ints.push_back(min_inliers);
+  EXPECT_EQ(valueOf(reconfigure(strict).ints, "verification_min_inliers").value, inliers + 1);
+  ASSERT_TRUE(ros::service::call("/sparse_match", srv));
+  EXPECT_EQ(srv.response.inliers, inliers);
+  EXPECT_FALSE(srv.response.verified) << "one inlier short of the retuned min_inliers";
 }
 
 }  // namespace

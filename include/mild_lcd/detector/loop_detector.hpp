@@ -131,6 +131,9 @@ class LoopDetector {
   // setVerifier is kept). Touches only the candidate, scoring and verification parameters, so
   // prepareRestore (which reads the database and filter ones) may run beside it.
   void retune(const DetectorParams& next);
+  // How many retunes took effect: callers holding a copy of some parameters (a verifier of their
+  // own) refresh it when this changes.
+  uint64_t retunes() const { return retunes_; }
 
   // Replaces the check run on every reported candidate (a GeometricVerifier when
   // verification.enabled, none otherwise).
@@ -205,6 +208,7 @@ class LoopDetector {
   uint64_t next_id_ = 0;
   KeyframeIndex session_start_ = 0;
   uint32_t session_ = 0;
+  uint64_t retunes_ = 0;
 };
 
 }  // namespace mild

@@ -78,6 +78,7 @@ void LoopDetector::retune(const DetectorParams& next) {
   params_.scoring.decision_probability = next.scoring.decision_probability;
   params_.verification = next.verification;
   if (verifier) verifier_ = std::move(verifier);
+  ++retunes_;
 }
 
 void LoopDetector::reset() {
