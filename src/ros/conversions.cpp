@@ -184,11 +184,7 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
                                              static_cast<long>(msg.keypoints.size()));
   f.keypoints = keypointsFromMsg(msg.keypoints);
   f.camera = intrinsicsFromMsg(msg.camera_info);
-  if (!msg.depths.empty() && msg.depths.size() != msg.keypoints.size()) {
-    throw mild::InvalidInput("keyframe has " + std::to_string(msg.depths.size()) + " depths for " +
-                             std::to_string(msg.keypoints.size()) + " keypoints (give one per keypoint, or none)");
-  }
-  f.depths = msg.depths;
+  f.depths = msg.depths;  // their count is checked by the detector (checkCameraAndDepths)
   return f;
 }
 

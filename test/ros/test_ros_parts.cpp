@@ -373,8 +373,10 @@ TEST(Conversions, AKeyframesCameraInfoAndDepthsReachTheCore) {
   ASSERT_EQ(f.depths.size(), 2u);
   EXPECT_EQ(f.depths[0], 1.5f);
 
-  msg.depths.push_back(2.0f);  // three depths for two keypoints
-  EXPECT_THROW(featuresFromMsg(msg), mild::InvalidInput);
+  msg.depths.push_back(2.0f);  // three depths for two keypoints: refused by the detector, unchanged
+  mild::LoopDetector detector;
+  EXPECT_THROW(detector.process(featuresFromMsg(msg), 1.0), mild::InvalidInput);
+  EXPECT_EQ(detector.size(), 0u);
   msg.depths.clear();
   msg.camera_info.K = {};  // all zero: unknown, not an error
   EXPECT_FALSE(featuresFromMsg(msg).camera.known());

@@ -34,6 +34,10 @@ struct Features {
   std::vector<float> depths;  // empty, or one per keypoint
 };
 
+// Throws InvalidInput, naming the problem, when the camera is malformed (CameraIntrinsics::wellFormed)
+// or there are depths but not one per keypoint.
+void checkCameraAndDepths(const Features& features);
+
 // Converts an 8-bit image of the given format to one grey channel. Throws InvalidInput for an empty
 // image, a depth other than 8 bits, or a channel count that does not match the format.
 cv::Mat toGray(const cv::Mat& image, PixelFormat format);

@@ -279,13 +279,7 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
     throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
                        std::to_string(features.descriptors.size()) + " descriptors");
   }
-  if (!features.depths.empty() && features.depths.size() != features.keypoints.size()) {
-    throw InvalidInput("keyframe has " + std::to_string(features.depths.size()) + " depths for " +
-                       std::to_string(features.keypoints.size()) + " keypoints (give one per keypoint, or none)");
-  }
-  if (!features.camera.wellFormed()) {
-    throw InvalidInput("keyframe camera intrinsics need positive fx, fy and finite cx, cy (or all zero: unknown)");
-  }
+  checkCameraAndDepths(features);
   checkId(id);
   if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
   DetectionResult result;

@@ -69,6 +69,16 @@ void OrbParams::validate() const {
   }
 }
 
+void checkCameraAndDepths(const Features& features) {
+  if (!features.depths.empty() && features.depths.size() != features.keypoints.size()) {
+    throw InvalidInput("keyframe has " + std::to_string(features.depths.size()) + " depths for " +
+                       std::to_string(features.keypoints.size()) + " keypoints (give one per keypoint, or none)");
+  }
+  if (!features.camera.wellFormed()) {
+    throw InvalidInput("camera intrinsics need positive fx, fy and finite cx, cy (or all zero: unknown)");
+  }
+}
+
 cv::Mat toGray(const cv::Mat& image, PixelFormat format) {
   if (image.empty()) throw InvalidInput("image is empty (0 x 0)");
   if (image.depth() != CV_8U) {

@@ -52,13 +52,8 @@ GeometricCheck GeometricVerifier::check(const Features& query, const Features& c
 
 GeometricCheck GeometricVerifier::fit(const Features& query, const Features& train,
                                       std::vector<FeatureMatch> matches) const {
-  if (!query.camera.wellFormed() || !train.camera.wellFormed()) {
-    throw InvalidInput("camera intrinsics need positive fx, fy and finite cx, cy (or all zero: unknown)");
-  }
-  if (!query.depths.empty() && query.depths.size() != query.keypoints.size()) {
-    throw InvalidInput("query has " + std::to_string(query.depths.size()) + " depths for " +
-                       std::to_string(query.keypoints.size()) + " keypoints (give one per keypoint, or none)");
-  }
+  checkCameraAndDepths(query);
+  checkCameraAndDepths(train);
   // A keyframe's own intrinsics first; then the configured ones; then the other view's (one camera).
   const CameraIntrinsics configured = params_.intrinsics();
   const auto resolve = [&](const CameraIntrinsics& own, const CameraIntrinsics& other) {
