@@ -37,8 +37,19 @@ std::vector<FeatureMatch> exactRatioMatches(const Features& a, const Features& b
 MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping,
                                      const std::vector<FeaturePair>& disjoint, const PriorMeasurementParams& params) {
   MeasuredPriors out;
-  out.inlier_counts.assign(kDescriptorBits + 1, 0.0);
-  out.outlier_counts.assign(kDescriptorBits + 1, 0.0);
+  int bytes = 0;
+  for (const auto* pairs : {&overlapping, &disjoint}) {
+    for (const FeaturePair& pair : *pairs) {
+      for (const Features* view : {pair.a, pair.b}) {
+        checkView(view);
+        if (bytes == 0 && !view->descriptors.empty()) bytes = view->descriptors.front().bytes;
+        checkDescriptorWidth(view->descriptors, bytes, "a view");
+      }
+    }
+  }
+  out.bits = bytes == 0 ? kOrbDescriptorBytes * 8 : bytes * 8;
+  out.inlier_counts.assign(static_cast<size_t>(out.bits) + 1, 0.0);
+  out.outlier_counts.assign(static_cast<size_t>(out.bits) + 1, 0.0);
 
   VerificationParams geometry;
   geometry.ransac_threshold = params.ransac_threshold;
@@ -74,7 +85,7 @@ MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping
 double indexRecall(const std::vector<std::pair<Descriptor, Descriptor>>& correspondences, MihParams params) {
   if (correspondences.empty()) throw InvalidInput("no correspondences to look up");
   params.cap_buckets = false;  // every stored descriptor must stay findable
-  MihIndex index(params);
+  MihIndex index(params, correspondences.front().first.bits());
   const FeatureId n = static_cast<FeatureId>(correspondences.size());
   for (FeatureId k = 0; k < n; ++k) index.insertKeyframe(&correspondences[k].second, 1, k);
   size_t found = 0;

@@ -12,32 +12,37 @@ namespace {
 
 using Real = long double;  // 80-bit extended: exponent range to 2^16383, so 256! and 64^256 fit
 
-constexpr int kBits = kDescriptorBits;
-
-void checkArguments(int r, int m) {
-  if (m < 1 || m > kBits) throw InvalidInput("m (hash tables) must be in [1, 256], got " + std::to_string(m));
+void checkArguments(int r, int m, int bits) {
+  if (bits < 8 || bits > kMaxDescriptorBits) {
+    throw InvalidInput("descriptor width must be in [8, " + std::to_string(kMaxDescriptorBits) + "] bits, got " +
+                       std::to_string(bits));
+  }
+  if (m < 1 || m > bits) {
+    throw InvalidInput("m (hash tables) must be in [1, " + std::to_string(bits) + "], got " + std::to_string(m));
+  }
   if (r < 0) throw InvalidInput("r (probe radius) must be >= 0, got " + std::to_string(r));
 }
 
-// Substring lengths as SubstringLayout cuts them: the first 256 mod m are one bit longer.
-std::vector<int> substringLengths(int m) {
-  std::vector<int> lengths(m, kBits / m);
-  for (int t = 0; t < kBits % m; ++t) ++lengths[t];
+// Substring lengths as SubstringLayout cuts them: the first (bits mod m) are one bit longer.
+std::vector<int> substringLengths(int m, int bits) {
+  std::vector<int> lengths(m, bits / m);
+  for (int t = 0; t < bits % m; ++t) ++lengths[t];
   return lengths;
 }
 
-// Truncated product of polynomials in x, degree <= kBits.
+// Truncated product of polynomials in x (degree <= their size - 1).
 std::vector<Real> multiply(const std::vector<Real>& a, const std::vector<Real>& b) {
-  std::vector<Real> out(kBits + 1, 0.0L);
-  for (int i = 0; i <= kBits; ++i) {
+  const int top = static_cast<int>(a.size()) - 1;
+  std::vector<Real> out(a.size(), 0.0L);
+  for (int i = 0; i <= top; ++i) {
     if (a[i] == 0.0L) continue;
-    for (int j = 0; i + j <= kBits; ++j) out[i + j] += a[i] * b[j];
+    for (int j = 0; i + j <= top; ++j) out[i + j] += a[i] * b[j];
   }
   return out;
 }
 
 std::vector<Real> power(std::vector<Real> base, int exponent) {
-  std::vector<Real> result(kBits + 1, 0.0L);
+  std::vector<Real> result(base.size(), 0.0L);
   result[0] = 1.0L;
   while (exponent > 0) {  // square-and-multiply: log2(m) products instead of m
     if (exponent & 1) result = multiply(result, base);
@@ -47,49 +52,49 @@ std::vector<Real> power(std::vector<Real> base, int exponent) {
   return result;
 }
 
-// Pascal's triangle up to n = 256: sums only, so every entry is correct to long double precision.
+// Pascal's triangle up to n = 512: sums only, so every entry is correct to long double precision.
 Real binomial(int n, int k) {
   static const std::vector<std::vector<Real>> table = [] {
-    std::vector<std::vector<Real>> t(kBits + 1);
-    for (int i = 0; i <= kBits; ++i) {
+    std::vector<std::vector<Real>> t(kMaxDescriptorBits + 1);
+    for (int i = 0; i <= kMaxDescriptorBits; ++i) {
       t[i].assign(i + 1, 1.0L);
       for (int j = 1; j < i; ++j) t[i][j] = t[i - 1][j - 1] + t[i - 1][j];
     }
     return t;
   }();
-  if (n < 0 || n > kBits || k < 0 || k > n) return 0.0L;
+  if (n < 0 || n > kMaxDescriptorBits || k < 0 || k > n) return 0.0L;
   return table[n][k];
 }
 
 // P(every substring holds more than r of the d differing bits), for every d.
-std::vector<Real> allAboveRadius(int r, int m, BitModel model) {
-  std::vector<Real> out(kBits + 1, 0.0L);
+std::vector<Real> allAboveRadius(int r, int m, BitModel model, int bits) {
+  std::vector<Real> out(bits + 1, 0.0L);
   if (model == BitModel::kPaper) {
     // d! / m^d [x^d] (sum_{k>r} x^k/k!)^m
-    std::vector<Real> bin(kBits + 1, 0.0L);
+    std::vector<Real> bin(bits + 1, 0.0L);
     Real inverse_factorial = 1.0L;
-    for (int k = 0; k <= kBits; ++k) {
+    for (int k = 0; k <= bits; ++k) {
       if (k > 0) inverse_factorial /= k;
       if (k > r) bin[k] = inverse_factorial;
     }
     const std::vector<Real> all = power(bin, m);
     Real scale = 1.0L;  // d! / m^d, built up term by term to stay in range
-    for (int d = 0; d <= kBits; ++d) {
+    for (int d = 0; d <= bits; ++d) {
       if (d > 0) scale *= static_cast<Real>(d) / m;
       out[d] = all[d] * scale;
     }
   } else {
-    // [x^d] prod_t sum_{k>r} C(l_t, k) x^k / C(256, d); lengths take two values at most.
-    std::vector<Real> all(kBits + 1, 0.0L);
+    // [x^d] prod_t sum_{k>r} C(l_t, k) x^k / C(bits, d); lengths take two values at most.
+    std::vector<Real> all(bits + 1, 0.0L);
     all[0] = 1.0L;
-    const int longer = kBits % m;
-    for (const auto& [length, count] : {std::pair<int, int>{kBits / m + 1, longer}, {kBits / m, m - longer}}) {
+    const int longer = bits % m;
+    for (const auto& [length, count] : {std::pair<int, int>{bits / m + 1, longer}, {bits / m, m - longer}}) {
       if (count == 0) continue;
-      std::vector<Real> substring(kBits + 1, 0.0L);
+      std::vector<Real> substring(bits + 1, 0.0L);
       for (int k = r + 1; k <= length; ++k) substring[k] = binomial(length, k);
       all = multiply(all, power(substring, count));
     }
-    for (int d = 0; d <= kBits; ++d) out[d] = all[d] / binomial(kBits, d);
+    for (int d = 0; d <= bits; ++d) out[d] = all[d] / binomial(bits, d);
   }
   return out;
 }
@@ -104,23 +109,23 @@ BitModel bitModelFromName(const std::string& name) {
 
 std::string bitModelName(BitModel model) { return model == BitModel::kPaper ? "paper" : "exact"; }
 
-std::vector<double> recallCurve(int r, int m, BitModel model) {
-  checkArguments(r, m);
-  const std::vector<Real> miss = allAboveRadius(r, m, model);
-  std::vector<double> recall(kBits + 1);
-  for (int d = 0; d <= kBits; ++d) {
+std::vector<double> recallCurve(int r, int m, BitModel model, int bits) {
+  checkArguments(r, m, bits);
+  const std::vector<Real> miss = allAboveRadius(r, m, model, bits);
+  std::vector<double> recall(bits + 1);
+  for (int d = 0; d <= bits; ++d) {
     recall[d] = static_cast<double>(std::clamp(1.0L - miss[d], 0.0L, 1.0L));
   }
   return recall;
 }
 
-double recallProbability(int r, int m, int d, BitModel model) {
-  if (d < 0 || d > kBits) throw InvalidInput("d must be in [0, 256], got " + std::to_string(d));
-  return recallCurve(r, m, model)[d];
+double recallProbability(int r, int m, int d, BitModel model, int bits) {
+  if (d < 0 || d > bits) throw InvalidInput("d must be in [0, " + std::to_string(bits) + "], got " + std::to_string(d));
+  return recallCurve(r, m, model, bits)[d];
 }
 
 double recallByInclusionExclusion(int m, int d) {
-  checkArguments(0, m);
+  checkArguments(0, m, kMaxDescriptorBits);
   Real sum = 0.0L;
   for (int j = 0; j <= m; ++j) {
     const Real term = binomial(m, j) * std::pow(1.0L - static_cast<Real>(j) / m, d);
@@ -129,17 +134,22 @@ double recallByInclusionExclusion(int m, int d) {
   return static_cast<double>(1.0L - sum);
 }
 
-DistancePrior DistancePrior::normal(double mean, double stddev) {
+DistancePrior DistancePrior::normal(double mean, double stddev, int bits) {
   if (!(stddev > 0.0) || !std::isfinite(stddev) || !std::isfinite(mean)) {
     throw InvalidInput("a normal prior needs a finite mean and a positive standard deviation");
   }
-  std::vector<double> counts(kBits + 1);
-  for (int d = 0; d <= kBits; ++d) counts[d] = std::exp(-0.5 * std::pow((d - mean) / stddev, 2));
-  return fromCounts(counts);
+  checkArguments(0, 1, bits);
+  std::vector<double> counts(bits + 1);
+  for (int d = 0; d <= bits; ++d) counts[d] = std::exp(-0.5 * std::pow((d - mean) / stddev, 2));
+  return fromCounts(counts, bits);
 }
 
-DistancePrior DistancePrior::fromCounts(const std::vector<double>& counts) {
-  if (counts.size() > static_cast<size_t>(kBits + 1)) throw InvalidInput("a distance prior covers d = 0..256 only");
+DistancePrior DistancePrior::fromCounts(const std::vector<double>& counts, int bits) {
+  checkArguments(0, 1, bits);
+  if (counts.size() > static_cast<size_t>(bits + 1)) {
+    throw InvalidInput("a distance prior of " + std::to_string(bits) + "-bit descriptors covers d = 0.." +
+                       std::to_string(bits) + " only");
+  }
   double total = 0.0;
   for (double c : counts) {
     if (!(c >= 0.0) || !std::isfinite(c)) throw InvalidInput("distance counts must be finite and non-negative");
@@ -147,7 +157,7 @@ DistancePrior DistancePrior::fromCounts(const std::vector<double>& counts) {
   }
   if (!(total > 0.0)) throw InvalidInput("distance counts are all zero: nothing to build a prior from");
   DistancePrior prior;
-  prior.p.assign(kBits + 1, 0.0);
+  prior.p.assign(static_cast<size_t>(bits) + 1, 0.0);
   for (size_t d = 0; d < counts.size(); ++d) prior.p[d] = counts[d] / total;
   return prior;
 }
@@ -161,27 +171,28 @@ double DistancePrior::mean() const {
 DistancePrior paperInlierPrior() { return DistancePrior::normal(32.0, 10.0); }
 DistancePrior paperOutlierPrior() { return DistancePrior::normal(128.0, 20.0); }
 
-double fixedCost(int m) {
-  checkArguments(0, m);
+double fixedCost(int m, int bits) {
+  checkArguments(0, m, bits);
   double total = 0.0;
-  for (int length : substringLengths(m)) total += std::ldexp(1.0, length);
+  for (int length : substringLengths(m, bits)) total += std::ldexp(1.0, length);
   return total;
 }
 
 MihCost analyse(int r, int m, const DistancePrior& inliers, const DistancePrior& outliers, BitModel model) {
-  if (inliers.p.size() != static_cast<size_t>(kBits + 1) || outliers.p.size() != static_cast<size_t>(kBits + 1)) {
-    throw InvalidInput("distance priors must cover d = 0..256");
+  const int bits = inliers.bits();
+  if (outliers.bits() != bits || bits < 1) {
+    throw InvalidInput("inlier and outlier priors must cover the same distances (d = 0..bits)");
   }
-  const std::vector<double> recall = recallCurve(r, m, model);
+  const std::vector<double> recall = recallCurve(r, m, model, bits);
   MihCost cost;
   cost.m = m;
   cost.r = r;
-  for (int d = 0; d <= kBits; ++d) {
+  for (int d = 0; d <= bits; ++d) {
     cost.accuracy += recall[d] * inliers.p[d];
     cost.complexity += recall[d] * outliers.p[d];
   }
-  cost.fixed_cost = fixedCost(m);
-  for (int length : substringLengths(m)) {
+  cost.fixed_cost = fixedCost(m, bits);
+  for (int length : substringLengths(m, bits)) {
     for (int k = 0; k <= std::min(r, length); ++k) cost.probes += static_cast<double>(binomial(length, k));
   }
   return cost;

@@ -178,10 +178,19 @@ ros::Time stampOf(double seconds) {
   return ros::Time(seconds);
 }
 
+int descriptorBytesOf(uint32_t field) {
+  if (field == 0) return mild::kOrbDescriptorBytes;
+  if (field > static_cast<uint32_t>(mild::kMaxDescriptorBytes)) {
+    throw mild::InvalidInput("descriptor_bytes " + std::to_string(field) + " is not a supported width (8..64)");
+  }
+  return static_cast<int>(field);
+}
+
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
   mild::Features f;
-  f.descriptors = mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
-                                             static_cast<long>(msg.keypoints.size()));
+  f.descriptors =
+      mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
+                                 descriptorBytesOf(msg.descriptor_bytes), static_cast<long>(msg.keypoints.size()));
   f.keypoints = keypointsFromMsg(msg.keypoints);
   f.camera = intrinsicsFromMsg(msg.camera_info);
   f.depths = msg.depths;  // their count is checked by the detector (checkCameraAndDepths)
@@ -269,16 +278,16 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
 namespace {
 
 mild::Features requestSide(const std::vector<uint8_t>& descriptors, const std::vector<mild_lcd::KeyPoint>& keypoints,
-                           const char* side, size_t max_features) {
+                           int bytes, const char* side, size_t max_features) {
   if (descriptors.empty()) throw mild::InvalidInput(std::string(side) + "_descriptors is empty");
-  if (descriptors.size() / mild::kDescriptorBytes > max_features || keypoints.size() > max_features) {
-    throw mild::CapacityError(std::string(side) + " side has " +
-                              std::to_string(std::max(descriptors.size() / mild::kDescriptorBytes, keypoints.size())) +
+  const size_t rows = descriptors.size() / static_cast<size_t>(bytes);
+  if (rows > max_features || keypoints.size() > max_features) {
+    throw mild::CapacityError(std::string(side) + " side has " + std::to_string(std::max(rows, keypoints.size())) +
                               " features, more than ~max_match_features (" + std::to_string(max_features) + ")");
   }
   mild::Features f;
   try {
-    f.descriptors = mild::descriptorsFromBytes(descriptors.data(), descriptors.size(),
+    f.descriptors = mild::descriptorsFromBytes(descriptors.data(), descriptors.size(), bytes,
                                                keypoints.empty() ? -1 : static_cast<long>(keypoints.size()));
   } catch (const mild::InvalidInput& e) {
     throw mild::InvalidInput(std::string(side) + ": " + e.what());
@@ -295,8 +304,9 @@ mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request
   try {
     mild::Features query, train;
     if (request.use_descriptors) {
-      query = requestSide(request.query_descriptors, request.query_keypoints, "query", max_features);
-      train = requestSide(request.train_descriptors, request.train_keypoints, "train", max_features);
+      const int bytes = descriptorBytesOf(request.descriptor_bytes);
+      query = requestSide(request.query_descriptors, request.query_keypoints, bytes, "query", max_features);
+      train = requestSide(request.train_descriptors, request.train_keypoints, bytes, "train", max_features);
     } else {
       if (!request.query_descriptors.empty() || !request.train_descriptors.empty()) {
         throw mild::InvalidInput(

@@ -1,6 +1,7 @@
 // mild_make_bag: writes an image sequence (bench layout) into a rosbag for replay through the
 // nodelet: raw mono8 images, the original compressed bytes (the `compressed` transport), and
-// Keyframe messages with ORB features computed by mild_lcd's extractor (the `keyframe` input).
+// Keyframe messages with features computed by mild_lcd's extractors (the `keyframe` input; ORB
+// by default, --features brisk or akaze for other descriptor widths).
 // Time stamps come from times.txt (or the frame rate) plus a start offset. With --camera, also
 // camera_info beside the images and the intrinsics in each Keyframe.
 
@@ -23,7 +24,7 @@
 #include "common/image_sequence.hpp"
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 
 int main(int argc, char** argv) {
@@ -33,10 +34,13 @@ int main(int argc, char** argv) {
   double start = 1000.0, fps = 10.0;
   long id_offset = 0;
   std::vector<double> camera;
+  std::string features = "orb";
+  bool no_images = false;
   app.add_option("--images", images, "sequence folder (frames, or an images/ subfolder)")->required();
   app.add_option("--output", output, "bag file to write")->required();
-  app.add_option("--image-topic", image_topic, "raw images; compressed ones go to <topic>/compressed (empty: none)");
-  app.add_option("--keyframe-topic", keyframe_topic, "mild_lcd/Keyframe messages (empty: none)");
+  app.add_option("--image-topic", image_topic, "raw images; compressed ones go to <topic>/compressed");
+  app.add_flag("--no-images", no_images, "write no images, only Keyframes");
+  app.add_option("--keyframe-topic", keyframe_topic, "mild_lcd/Keyframe messages");
   app.add_option("--keyframe-id-offset", id_offset, "Keyframe.id = frame index + this");
   app.add_option("--start", start, "time stamp of the first frame, seconds");
   app.add_option("--fps", fps, "frame rate when the sequence has no times.txt");
@@ -45,10 +49,15 @@ int main(int argc, char** argv) {
                  "fx fy cx cy: write sensor_msgs/CameraInfo beside the images (image_transport's camera_info) "
                  "and into each Keyframe")
       ->expected(4);
+  app.add_option("--features", features, "extractor of the Keyframe messages: orb, brisk or akaze")
+      ->capture_default_str();
   return mild::tools::toolMain(app, argc, argv, [&] {
     ros::Time::init();
+    if (no_images) image_topic.clear();
     const mild::tools::ImageSequence seq = mild::tools::openImageSequence(images, fps);
-    const mild::OrbExtractor extractor;
+    mild::FeatureParams feature_params;
+    feature_params.type = features;
+    const std::unique_ptr<mild::FeatureExtractor> extractor = mild::makeFeatureExtractor(feature_params);
     sensor_msgs::CameraInfo info;
     if (!camera.empty()) {
       info.K = {camera[0], 0.0, camera[2], 0.0, camera[1], camera[3], 0.0, 0.0, 1.0};
@@ -84,7 +93,7 @@ int main(int argc, char** argv) {
         bag.write(image_topic + "/compressed", header.stamp, compressed);
       }
       if (!keyframe_topic.empty()) {
-        const mild::Features f = extractor.extract(image);
+        const mild::Features f = extractor->extract(image, mild::PixelFormat::kGray);
         mild_lcd::Keyframe kf;
         kf.header = header;
         kf.has_id = true;
@@ -92,6 +101,7 @@ int main(int argc, char** argv) {
         kf.keypoints = mild_lcd::keypointsToMsg(f.keypoints);
         const cv::Mat d = mild::descriptorsToMat(f.descriptors);
         kf.descriptors.assign(d.data, d.data + d.total());
+        kf.descriptor_bytes = static_cast<uint32_t>(extractor->descriptorBytes());
         if (!camera.empty()) {
           kf.camera_info = info;
           kf.camera_info.header = header;

@@ -12,30 +12,40 @@ namespace {
 
 using mild::InvalidInput;
 
-// The single declaration of the node's settings: name, field, meaning. Defaults are the struct's.
-template <class Visit>
-void visitSettings(NodeSettings& s, Visit&& visit) {
-  visit("use_image_input", s.use_image_input, "subscribe to `image` (image_transport)");
-  visit("use_keyframe_input", s.use_keyframe_input, "subscribe to `keyframe` (mild_lcd/Keyframe features)");
-  visit("image_transport", s.image_transport, "transport of `image`: raw, compressed, or any installed plugin");
-  visit("use_camera_info", s.use_camera_info,
+// The single declaration of the node's settings: name, field, bounds, meaning. Defaults are the
+// struct's; bounds are checked as the detector's are (mild::Bounds), with the names given "~".
+template <class Settings, class Visit>
+void visitSettings(Settings& s, Visit&& visit) {
+  using mild::Bounds;
+  visit("use_image_input", s.use_image_input, Bounds::any(), "subscribe to `image` (image_transport)");
+  visit("use_keyframe_input", s.use_keyframe_input, Bounds::any(),
+        "subscribe to `keyframe` (mild_lcd/Keyframe features)");
+  visit("image_transport", s.image_transport, Bounds::any(),
+        "transport of `image`: raw, compressed, or any installed plugin");
+  visit("use_camera_info", s.use_camera_info, Bounds::any(),
         "with image input, take intrinsics from `camera_info` beside `image` (the newest received; "
         "verification/fx.. until one arrives)");
-  visit("publish_correspondences", s.publish_correspondences,
+  visit("publish_correspondences", s.publish_correspondences, Bounds::any(),
         "add each verified candidate's inlier matches (keypoint indices and pixels) to `loop_closure`");
-  visit("queue_size", s.queue_size, "keyframes waiting for the worker; when full the oldest is dropped and counted");
-  visit("debug_image_cache", s.debug_image_cache, "keyframes kept at half resolution for `debug_image` (0 = none)");
-  visit("debug_image_cache_mb", s.debug_image_cache_mb, "and at most this many megabytes of them");
-  visit("max_image_pixels", s.max_image_pixels, "larger images (width x height) are refused before decoding");
-  visit("database_dir", s.database_dir,
+  visit("queue_size", s.queue_size, Bounds::in(1, 100000),
+        "keyframes waiting for the worker; when full the oldest is dropped and counted");
+  visit("debug_image_cache", s.debug_image_cache, Bounds::in(0, 1000000),
+        "keyframes kept at half resolution for `debug_image` (0 = none)");
+  visit("debug_image_cache_mb", s.debug_image_cache_mb, Bounds::in(0, 1 << 20),
+        "and at most this many megabytes of them");
+  visit("max_image_pixels", s.max_image_pixels, Bounds::in(1, 1 << 30),
+        "larger images (width x height) are refused before decoding");
+  visit("database_dir", s.database_dir, Bounds::any(),
         "the only folder maps are saved to and loaded from (default: database_path's folder, else $ROS_HOME/mild_lcd)");
-  visit("database_path", s.database_path,
+  visit("database_path", s.database_path, Bounds::any(),
         "map file inside database_dir: default of the services, and of load_on_start/save_on_shutdown");
-  visit("load_on_start", s.load_on_start, "load database_path at start-up, as a new session");
-  visit("save_on_shutdown", s.save_on_shutdown,
+  visit("load_on_start", s.load_on_start, Bounds::any(), "load database_path at start-up, as a new session");
+  visit("save_on_shutdown", s.save_on_shutdown, Bounds::any(),
         "save to database_path on shutdown (never after a failed start-up load)");
-  visit("max_database_mb", s.max_database_mb, "database files larger than this are refused unread");
-  visit("max_match_features", s.max_match_features, "descriptors per side of a sparse_match request, at most");
+  visit("max_database_mb", s.max_database_mb, Bounds::in(1, 1 << 24),
+        "database files larger than this are refused unread");
+  visit("max_match_features", s.max_match_features, Bounds::in(1, 10000000),
+        "descriptors per side of a sparse_match request, at most");
 }
 
 template <class T>
@@ -49,21 +59,14 @@ std::string toText(const T& v) {
   }
 }
 
-void requireRange(const std::string& name, int value, int lo, int hi) {
-  if (value < lo || value > hi) {
-    throw InvalidInput("parameter ~" + name + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                       "], got " + std::to_string(value));
-  }
-}
-
 }  // namespace
 
 const std::vector<SettingDoc>& nodeSettingDocs() {
   static const std::vector<SettingDoc> docs = [] {
     std::vector<SettingDoc> out;
     NodeSettings defaults;
-    visitSettings(defaults, [&](const char* name, auto& field, const char* doc) {
-      out.push_back({name, toText(field), doc});
+    visitSettings(defaults, [&](const char* name, auto& field, const mild::Bounds& bounds, const char* doc) {
+      out.push_back({name, toText(field), bounds.text(), doc});
     });
     return out;
   }();
@@ -72,15 +75,15 @@ const std::vector<SettingDoc>& nodeSettingDocs() {
 
 std::string nodeSettingsMarkdown() {
   std::ostringstream out;
-  out << "| parameter | default | meaning |\n|---|---|---|\n";
+  out << "| parameter | default | range | meaning |\n|---|---|---|---|\n";
   for (const SettingDoc& d : nodeSettingDocs())
-    out << "| `~" << d.name << "` | `" << d.default_value << "` | " << d.doc << " |\n";
+    out << "| `~" << d.name << "` | `" << d.default_value << "` | " << d.range << " | " << d.doc << " |\n";
   return out.str();
 }
 
 NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::string& default_dir) {
   NodeSettings s;
-  visitSettings(s, [&](const char* name, auto& field, const char*) {
+  visitSettings(s, [&](const char* name, auto& field, const mild::Bounds&, const char*) {
     using T = std::decay_t<decltype(field)>;
     if constexpr (std::is_same_v<T, bool>) {
       if (auto v = source.getBool(name)) field = *v;
@@ -98,12 +101,9 @@ NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::
   if (!s.use_image_input && !s.use_keyframe_input) {
     throw InvalidInput("~use_image_input and ~use_keyframe_input are both false: nothing to listen to");
   }
-  requireRange("queue_size", s.queue_size, 1, 100000);
-  requireRange("debug_image_cache", s.debug_image_cache, 0, 1000000);
-  requireRange("debug_image_cache_mb", s.debug_image_cache_mb, 0, 1 << 20);
-  requireRange("max_image_pixels", s.max_image_pixels, 1, 1 << 30);
-  requireRange("max_database_mb", s.max_database_mb, 1, 1 << 24);
-  requireRange("max_match_features", s.max_match_features, 1, 10000000);
+  visitSettings(s, [](const char* name, const auto& field, const mild::Bounds& bounds, const char*) {
+    bounds.check(std::string("parameter ~") + name, field);
+  });
   if (s.image_transport.empty())
     throw InvalidInput("parameter ~image_transport must name a transport (raw, compressed, ...)");
 
@@ -124,7 +124,7 @@ NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::
 void rejectUnknownParameters(const mild::ParameterSource& source) {
   std::vector<std::string> known;
   NodeSettings scratch;
-  visitSettings(scratch, [&](const char* name, auto&, const char*) { known.emplace_back(name); });
+  visitSettings(scratch, [&](const char* name, auto&, const mild::Bounds&, const char*) { known.emplace_back(name); });
   // Read by libraries the node uses, from the same private namespace.
   known.emplace_back("diagnostic_period");
   // Written by the node's own dynamic_reconfigure server (~tuning): the runtime parameters, each
@@ -140,8 +140,10 @@ void rejectUnknownParameters(const mild::ParameterSource& source) {
     if (std::find(sections.begin(), sections.end(), top) != sections.end()) continue;  // the detector checks its own
     std::ostringstream names;
     for (size_t i = 0; i < known.size(); ++i) names << (i ? ", " : "") << known[i];
+    std::ostringstream detector;
+    for (size_t i = 0; i < sections.size(); ++i) detector << (i ? ", " : "") << sections[i] << "/";
     throw InvalidInput("unknown parameter ~" + name + " (the node's own are " + names.str() +
-                       "; the detector's are under orb/, index/, similarity/, filter/, detector/, verification/)");
+                       "; the detector's are under " + detector.str() + ")");
   }
 }
 

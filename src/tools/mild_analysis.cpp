@@ -17,7 +17,7 @@
 
 #include "common/image_sequence.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/offline/distance_priors.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/mih_analysis.hpp"
@@ -42,6 +42,8 @@ struct Options {
   std::string measure_priors;
   std::string output;
   int pairs = 150;
+  std::string features = "orb";
+  int bits = 256;
   bool json = false;
 };
 
@@ -74,16 +76,17 @@ json histogramJson(const std::vector<double>& counts) {
 
 std::pair<mild::DistancePrior, mild::DistancePrior> loadPriors(const Options& opt) {
   if (opt.priors.empty()) {
-    return {mild::DistancePrior::normal(opt.inlier_mean, opt.inlier_std),
-            mild::DistancePrior::normal(opt.outlier_mean, opt.outlier_std)};
+    return {mild::DistancePrior::normal(opt.inlier_mean, opt.inlier_std, opt.bits),
+            mild::DistancePrior::normal(opt.outlier_mean, opt.outlier_std, opt.bits)};
   }
   std::ifstream in(opt.priors);
   if (!in) throw mild::InvalidInput(opt.priors + ": cannot read the priors file");
   json j;
   try {
     in >> j;
-    return {mild::DistancePrior::fromCounts(j.at("inlier_counts").get<std::vector<double>>()),
-            mild::DistancePrior::fromCounts(j.at("outlier_counts").get<std::vector<double>>())};
+    const int bits = j.value("bits", 256);  // files from before the width was recorded are ORB's
+    return {mild::DistancePrior::fromCounts(j.at("inlier_counts").get<std::vector<double>>(), bits),
+            mild::DistancePrior::fromCounts(j.at("outlier_counts").get<std::vector<double>>(), bits)};
   } catch (const json::exception& e) {
     throw mild::InvalidInput(opt.priors + ": not a priors file written by --measure-priors (" + e.what() + ")");
   }
@@ -109,14 +112,16 @@ int measurePriors(const Options& opt) {
   std::shuffle(overlapping.begin(), overlapping.end(), rng);
   if (overlapping.size() > static_cast<size_t>(opt.pairs)) overlapping.resize(opt.pairs);
 
-  mild::OrbExtractor extractor;
+  mild::FeatureParams feature_params;
+  feature_params.type = opt.features;
+  const std::unique_ptr<mild::FeatureExtractor> extractor = mild::makeFeatureExtractor(feature_params);
   std::map<int, mild::Features> features;
   auto featuresOf = [&](int i) -> const mild::Features* {
     auto it = features.find(i);
     if (it == features.end()) {
       const cv::Mat image = cv::imread(seq.frames.at(i), cv::IMREAD_GRAYSCALE);
       if (image.empty()) throw mild::InvalidInput(seq.frames[i] + ": cannot read the image");
-      it = features.emplace(i, extractor.extract(image)).first;
+      it = features.emplace(i, extractor->extract(image, mild::PixelFormat::kGray)).first;
     }
     return &it->second;
   };
@@ -126,7 +131,10 @@ int measurePriors(const Options& opt) {
   const mild::MeasuredPriors measured = mild::measureDistancePriors(a, b);
   const mild::DistancePrior inliers = measured.inliers(), outliers = measured.outliers();
 
+  const int bits = measured.bits;
   json out = {{"sequence", seq.root},
+              {"features", opt.features},
+              {"bits", bits},
               {"overlapping_pairs", overlapping.size()},
               {"overlapping_pairs_used", measured.overlapping_pairs_used},
               {"disjoint_pairs", disjoint.size()},
@@ -137,7 +145,10 @@ int measurePriors(const Options& opt) {
               {"outlier_counts", histogramJson(measured.outlier_counts)}};
   // How well R(r, m), computed from these priors, predicts what the real index finds.
   json validation = json::array();
+  // The same tables per bit for any width: (16, 0) for ORB is (32, 0) for BRISK.
+  const int scale = std::max(1, bits / 256);
   for (auto [m, r] : std::vector<std::pair<int, int>>{{16, 0}, {12, 0}, {22, 0}, {11, 1}, {16, 1}, {8, 2}}) {
+    m *= scale;
     mild::MihParams params;
     params.num_tables = m;
     params.radius = r;
@@ -167,8 +178,9 @@ int measurePriors(const Options& opt) {
     std::printf("%zu inlier correspondences from %zu of %zu overlapping pairs; %zu disjoint pairs\n",
                 measured.inlier_descriptors.size(), measured.overlapping_pairs_used, overlapping.size(),
                 disjoint.size());
-    std::printf("inliers:  mean %.1f, std %.1f bits   (paper: N(32, 10))\n", inliers.mean(), stddev(inliers));
-    std::printf("outliers: mean %.1f, std %.1f bits   (paper: N(128, 20))\n", outliers.mean(), stddev(outliers));
+    std::printf("%s, %d-bit descriptors\n", opt.features.c_str(), bits);
+    std::printf("inliers:  mean %.1f, std %.1f bits   (paper, ORB: N(32, 10))\n", inliers.mean(), stddev(inliers));
+    std::printf("outliers: mean %.1f, std %.1f bits   (paper, ORB: N(128, 20))\n", outliers.mean(), stddev(outliers));
     std::printf("inlier pairs the index finds, against R(r, m) from these priors:\n");
     for (const auto& v : validation) {
       std::printf("  (m, r) = (%2d, %d): index %.3f   R exact model %.3f   R paper model %.3f\n", v["m"].get<int>(),
@@ -269,6 +281,11 @@ int main(int argc, char** argv) {
   app.add_option("--output", opt.output, "with --measure-priors: JSON file for --priors");
   app.add_option("--pairs", opt.pairs, "with --measure-priors: overlapping and disjoint pairs to use")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--features", opt.features, "with --measure-priors: the extractor (orb, brisk, akaze)")
+      ->capture_default_str();
+  app.add_option("--bits", opt.bits, "descriptor width of the normal priors (256 ORB, 512 BRISK, 488 AKAZE)")
+      ->check(CLI::Range(64, 512))
       ->capture_default_str();
   app.add_flag("--json", opt.json, "print one JSON object as the last line");
   return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });

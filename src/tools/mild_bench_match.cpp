@@ -20,7 +20,7 @@
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/orb_extractor.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/verification/sparse_matcher.hpp"
 
@@ -103,7 +103,7 @@ int run(const Options& opt) {
 
   mild::OrbParams orb;
   orb.num_features = opt.features;
-  const mild::OrbExtractor extractor(orb);
+  const mild::OrbExtractor extractor(orb);  // the paper's sparse-match figures are ORB's
   std::map<size_t, Frame> frames;
   auto frame = [&](size_t i) -> const Frame& {
     auto it = frames.find(i);
@@ -118,7 +118,7 @@ int run(const Options& opt) {
   mild::SparseMatchParams sp;
   sp.num_tables = opt.num_tables;
   sp.radius = opt.radius;
-  sp.max_distance = mild::kDescriptorBits;  // like BFMatcher::match: every query gets its nearest
+  sp.max_distance = 256;  // like BFMatcher::match: every query gets its nearest
   mild::SparseMatcher sparse(sp);
   cv::BFMatcher bf(cv::NORM_HAMMING);
   cv::FlannBasedMatcher lsh(cv::makePtr<cv::flann::LshIndexParams>(24, 10, 0));

@@ -30,7 +30,7 @@
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
 
@@ -45,6 +45,7 @@ struct Options {
   std::vector<std::string> images;
   std::string sequence;
   int features = 800;
+  std::string feature_type = "orb";
   int queries = 30;
   int brute_queries = 3;
   size_t brute_max_keyframes = 10000;
@@ -119,6 +120,7 @@ json measurePersistence(const KeyframeAt& keyframe_at, size_t n) {
   }
   mild::DetectorParams params;
   params.verification.enabled = false;
+  params.features.descriptor_bytes = state.descriptors.front().front().bytes;
   mild::LoopDetector detector(params);
   detector.restore(std::move(state), false);
   const fs::path file = fs::temp_directory_path() / ("mild_bench_scale_" + std::to_string(::getpid()) + ".mild");
@@ -139,9 +141,12 @@ int run(const Options& opt) {
   cv::setNumThreads(1);
   const std::vector<std::string> dirs = opt.images.empty() ? defaultImageDirs() : opt.images;
 
-  mild::OrbParams orb;
-  orb.num_features = opt.features;
-  const mild::OrbExtractor extractor(orb);
+  mild::FeatureParams feature_params;
+  feature_params.type = opt.feature_type;
+  feature_params.orb.num_features = feature_params.brisk.num_features = feature_params.akaze.num_features =
+      opt.features;
+  const std::unique_ptr<mild::FeatureExtractor> extractor_owner = mild::makeFeatureExtractor(feature_params);
+  const mild::FeatureExtractor& extractor = *extractor_owner;
   // Keyframes: a real walk's frames (--sequence), or real frames replicated to any size.
   std::optional<mild::tools::SequenceKeyframes> walk;
   std::optional<mild::tools::SyntheticKeyframes> synthetic;
@@ -164,7 +169,7 @@ int run(const Options& opt) {
     for (const auto& dir : dirs) {
       for (const auto& path : mild::tools::openImageSequence(dir).frames) {
         const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-        if (!image.empty()) real.push_back(extractor.extract(image).descriptors);
+        if (!image.empty()) real.push_back(extractor.extract(image, mild::PixelFormat::kGray).descriptors);
       }
     }
     synthetic.emplace(std::move(real), static_cast<size_t>(opt.features));
@@ -177,6 +182,8 @@ int run(const Options& opt) {
   }
 
   mild::DatabaseParams et_params;  // the defaults: early termination at 20 of the first 64 bits
+  et_params.descriptor_bytes = extractor.descriptorBytes();
+  const int bits = et_params.descriptor_bytes * 8;
   mild::DatabaseParams full_params = et_params;
   full_params.similarity.early_termination_threshold = 64;  // never rejects early
 
@@ -266,10 +273,10 @@ int run(const Options& opt) {
       }
     }
     if (n <= opt.faiss_max_keyframes) {  // faiss, on the same descriptors, range search within d0
-      mild::tools::FaissBaselines faiss(static_cast<int>(et_params.index.num_tables));
+      mild::tools::FaissBaselines faiss(bits, et_params.index.tablesFor(bits));
       for (size_t k = 0; k < n; ++k) faiss.add(keyframe_at(k));
       faiss_bytes_per_feature = faiss.entryBytesPerFeature();
-      const int d0 = et_params.similarity.max_distance;
+      const int d0 = et_params.similarity.scaledTo(bits).max_distance;
       for (const auto& q : queries) {
         auto t = Clock::now();
         const size_t found = faiss.queryMultiHash(q, d0);
@@ -283,7 +290,7 @@ int run(const Options& opt) {
         if (q == 0) faiss_exact_pairs = found;
       }
     }
-    if (!opt.skip_baseline) {
+    if (!opt.skip_baseline && bits == 256) {  // the 2017 design is ORB's 16 tables of 16 bits
       mild::tools::Mild2017Index old(et_params);
       for (size_t k = 0; k < n; ++k) old.insert(keyframe_at(k));
       for (const auto& q : queries) {
@@ -404,6 +411,8 @@ int main(int argc, char** argv) {
   app.add_option("--sequence", opt.sequence,
                  "build the databases from this walk's own frames in order (gen.py scale --frames N), not replicas")
       ->check(CLI::ExistingDirectory);
+  app.add_option("--feature-type", opt.feature_type, "extractor: orb (256 bits), brisk (512), akaze (486)")
+      ->capture_default_str();
   app.add_option("--features", opt.features, "features per keyframe")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

@@ -43,6 +43,7 @@ struct Options {
   double fps = 10.0;
   int min_gap = 40;
   bool print_config = false;
+  bool help_parameters = false;
 };
 
 // Reads one frame as 8-bit grey, BGR or BGRA; nullopt when the file cannot be decoded.
@@ -71,8 +72,16 @@ json timingJson(const std::vector<double>& samples) {
 int run(const Options& opt) {
   mild::DetectorParams params;
   if (!opt.config.empty()) params = mild::loadDetectorParams(mild::YamlParameterSource::fromFile(opt.config));
+  if (opt.help_parameters) {
+    std::cout << mild::parameterMarkdown();
+    return 0;
+  }
   if (opt.print_config) {
-    for (const auto& [name, value] : mild::describeParameters(params)) std::cout << name << ": " << value << "\n";
+    std::cout << mild::parameterYaml(params);
+    if (opt.images.empty()) return 0;
+  }
+  if (opt.images.empty() || opt.output.empty()) {
+    throw mild::InvalidInput("--images and --output are required (or --print-config alone)");
   }
   const mild::tools::ImageSequence seq = mild::tools::openImageSequence(opt.images, opt.fps);
   std::optional<mild::GroundTruth> truth;
@@ -227,10 +236,9 @@ int main(int argc, char** argv) {
   CLI::App app{"Run mild_lcd loop-closure detection over an image sequence (offline runner and evaluator)."};
   app.name("mild_offline");
   Options opt;
-  app.add_option("--images", opt.images, "folder of frames in file-name order, or a folder with an images/ subfolder")
-      ->required();
+  app.add_option("--images", opt.images, "folder of frames in file-name order, or a folder with an images/ subfolder");
   app.add_option("--config", opt.config, "YAML parameter file (see config/default.yaml)");
-  app.add_option("--output", opt.output, "candidates CSV to write (query,candidate,score)")->required();
+  app.add_option("--output", opt.output, "candidates CSV to write (query,candidate,score)");
   app.add_option("--gt", opt.gt, "ground-truth gt_loops.txt: print recall@100%P, average precision, max F1");
   app.add_option("--plots", opt.plots, "folder for pr_curve.png and loops_matrix.png (needs --gt)");
   app.add_option("--stats", opt.stats, "JSON file for per-stage timing and database size");
@@ -245,6 +253,10 @@ int main(int argc, char** argv) {
   app.add_option("--min-gap", opt.min_gap,
                  "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
       ->check(CLI::NonNegativeNumber);
-  app.add_flag("--print-config", opt.print_config, "print the effective parameters");
+  app.add_flag("--print-config", opt.print_config,
+               "print the effective parameters as YAML, with their bounds and meaning (alone: and exit; with the "
+               "defaults it is config/default.yaml)");
+  app.add_flag("--help-parameters", opt.help_parameters,
+               "print the detector's parameters as a Markdown table and exit");
   return mild::tools::toolMain(app, argc, argv, [&] { return run(opt); });
 }

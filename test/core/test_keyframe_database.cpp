@@ -15,17 +15,23 @@ namespace {
 
 using Candidate = std::function<bool(const Descriptor& query, FeatureId stored)>;
 
-// The similarity formula of SimilarityParams written out directly over an explicit candidate set.
+// The similarity formula of SimilarityParams written out directly over an explicit candidate set,
+// early termination included: a candidate more than early_termination_threshold bits away on its
+// first 64 bits takes no part (in index mode; exact search has no early termination).
 std::vector<double> referenceSimilarity(const KeyframeDatabase& db, const DescriptorList& query, KeyframeIndex n,
-                                        const Candidate& is_candidate) {
+                                        const Candidate& is_candidate, bool early_termination = true) {
   const SimilarityParams& p = db.params().similarity;
   std::vector<double> sim(n, 0.0);
   for (const Descriptor& f : query) {
     std::vector<std::pair<KeyframeIndex, double>> votes;
     for (KeyframeIndex k = 0; k < n; ++k) {
       for (FeatureId id = db.firstFeature(k); id < db.firstFeature(k) + db.featureCount(k); ++id) {
-        const int d = hammingDistance(f, db.descriptor(id));
-        if (d <= p.max_distance && is_candidate(f, id)) votes.emplace_back(k, std::exp(-double(d) * d / p.sigma2));
+        const Descriptor stored = db.descriptor(id);
+        const int d = hammingDistance(f, stored);
+        const bool early_out =
+            early_termination && popcount64(f.words[0] ^ stored.words[0]) > p.early_termination_threshold;
+        if (d <= p.max_distance && !early_out && is_candidate(f, id))
+          votes.emplace_back(k, std::exp(-double(d) * d / p.sigma2));
       }
     }
     if (votes.empty()) continue;
@@ -128,8 +134,8 @@ TEST(KeyframeDatabase, ExactModeEqualsBruteForceOverAllFeatures) {
   const Scene s = makeScene(rng);
   for (const auto& kf : s.keyframes) db.insert(kf);
   const QueryResult exact = db.query(s.query, kAllKeyframes, SearchMode::kExact);
-  expectNear(exact.similarity,
-             referenceSimilarity(db, s.query, db.size(), [](const Descriptor&, FeatureId) { return true; }));
+  expectNear(exact.similarity, referenceSimilarity(
+                                   db, s.query, db.size(), [](const Descriptor&, FeatureId) { return true; }, false));
   EXPECT_EQ(exact.stats.full_distances, s.query.size() * db.featureCount());
   // The index approximates: it can only miss votes, and on this scene it does.
   const QueryResult approx = db.query(s.query);
@@ -293,10 +299,17 @@ TEST(KeyframeDatabase, RejectsMalformedDescriptorsAndStaysUnchanged) {
   EXPECT_EQ(db.size(), 1u);
   EXPECT_EQ(db.featureCount(), features);
   EXPECT_EQ(db.index().entryCount(), entries);
-  EXPECT_THROW(descriptorsFromBytes(nullptr, 33), InvalidInput);
+  EXPECT_THROW(descriptorsFromBytes(nullptr, 33, 32), InvalidInput);
   const std::vector<uint8_t> bytes(64, 0);
-  EXPECT_THROW(descriptorsFromBytes(bytes.data(), bytes.size(), 3), InvalidInput);
-  EXPECT_EQ(descriptorsFromBytes(bytes.data(), bytes.size(), 2).size(), 2u);
+  EXPECT_THROW(descriptorsFromBytes(bytes.data(), bytes.size(), 32, 3), InvalidInput);
+  EXPECT_EQ(descriptorsFromBytes(bytes.data(), bytes.size(), 32, 2).size(), 2u);
+  EXPECT_EQ(descriptorsFromBytes(bytes.data(), bytes.size(), 64, 1).size(), 1u);
+  EXPECT_THROW(descriptorsFromBytes(bytes.data(), bytes.size(), 4), InvalidInput);  // not a supported width
+  // A keyframe of another width than the database's is refused whole.
+  EXPECT_THROW(db.insert(test::randomDescriptors(5, rng, 64)), InvalidInput);
+  EXPECT_THROW(db.query(test::randomDescriptors(5, rng, 64)), InvalidInput);
+  EXPECT_EQ(db.size(), 1u);
+  EXPECT_EQ(db.featureCount(), features);
 }
 
 TEST(KeyframeDatabase, InsertAndQueryQueriesBeforeInserting) {

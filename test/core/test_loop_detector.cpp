@@ -156,7 +156,7 @@ TEST(LoopDetector, ATiledTextureYieldsAtMostNumFeatures) {
   cv::Mat tiled;
   cv::repeat(tile, 40, 40, tiled);  // 640 x 640 of one 16-pixel tile
   DetectorParams p = fixtureParams();
-  p.orb.num_features = 800;
+  p.features.orb.num_features = 800;
   LoopDetector detector(p);
   const DetectionResult r = detector.process(tiled, PixelFormat::kGray, 0.0);
   EXPECT_LE(r.stats.features, 800u);
@@ -272,7 +272,7 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
   auto verifier = std::make_unique<RecordingVerifier>();
   const RecordingVerifier* seen = verifier.get();
   detector.setVerifier(std::move(verifier));
-  const OrbExtractor orb(p.orb);
+  const OrbExtractor orb(p.features.orb);
   const auto camera_of = [](size_t i) { return CameraIntrinsics{200.0 + i, 200.0 + i, 160.0, 120.0}; };
   std::vector<uint64_t> queries_with_candidates;
   for (size_t i = 0; i < 20; ++i) {
@@ -320,7 +320,7 @@ TEST(LoopDetector, RetunesWhatIsSafeWhileRunningAndRefusesTheRest) {
   invalid.candidates.max_candidates = 0;
   EXPECT_THROW(detector.retune(invalid), InvalidInput);
   EXPECT_EQ(detector.params().candidates.max_candidates, 1) << "a refused retune changes nothing";
-  EXPECT_EQ(detector.params().database.index.num_tables, 16);
+  EXPECT_EQ(detector.params().database.index.num_tables, 0);  // automatic, as constructed
 
   // A verifier installed by the caller survives a change of the verification parameters.
   auto verifier = std::make_unique<CountingVerifier>();

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/orb_extractor.hpp"
 #include "mild_lcd/index/mih_index.hpp"
 #include "mild_lcd/offline/distance_priors.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
@@ -135,7 +136,7 @@ TEST(MihAnalysis, ExactModelMatchesTheIndexOnRandomBitFlips) {
       params.radius = r;
       params.cap_buckets = false;
       for (int d : {16, 32, 48, 64, 96}) {
-        MihIndex index(params);
+        MihIndex index(params, 256);
         DescriptorList stored = test::randomDescriptors(trials, rng);
         for (FeatureId i = 0; i < static_cast<FeatureId>(trials); ++i) index.insertKeyframe(&stored[i], 1, i);
         int found = 0;

@@ -10,6 +10,8 @@
 namespace mild {
 namespace {
 
+constexpr int kOrbBits = 256;
+
 MihParams uncapped(int m, int r) {
   MihParams p;
   p.num_tables = m;
@@ -32,14 +34,13 @@ TEST(MihIndex, FindsEveryFeatureWithinPigeonholeDistance) {
   const std::vector<std::pair<int, int>> settings = {{16, 0}, {8, 0},  {32, 0}, {15, 0}, {24, 0},
                                                      {16, 1}, {10, 1}, {8, 2},  {12, 2}, {16, 3}};
   for (auto [m, r] : settings) {
-    MihIndex index(uncapped(m, r));
+    MihIndex index(uncapped(m, r), kOrbBits);
     const int guaranteed = m * (r + 1);
     DescriptorList stored;
     const Descriptor base = test::randomDescriptor(rng);
     // Features at every distance from the query, plus unrelated ones; one keyframe each so that the
     // intra-image rule cannot hide any of them.
-    for (int d = 0; d < guaranteed + 40 && d <= kDescriptorBits; ++d)
-      stored.push_back(test::flipRandomBits(base, d, rng));
+    for (int d = 0; d < guaranteed + 40 && d <= kOrbBits; ++d) stored.push_back(test::flipRandomBits(base, d, rng));
     for (int i = 0; i < 200; ++i) stored.push_back(test::randomDescriptor(rng));
     for (size_t i = 0; i < stored.size(); ++i) index.insertKeyframe(&stored[i], 1, static_cast<FeatureId>(i));
 
@@ -59,7 +60,7 @@ TEST(MihIndex, FindsEveryFeatureWithinPigeonholeDistance) {
 
 TEST(MihIndex, ProbesEveryBucketWithinTheRadius) {
   for (int r = 0; r <= 3; ++r) {
-    MihIndex index(uncapped(16, r));
+    MihIndex index(uncapped(16, r), kOrbBits);
     ProbeCounters counters;
     index.probe(Descriptor{}, kAllKeyframes, counters, [](FeatureId, int) {});
     uint64_t per_table = 0;
@@ -74,7 +75,7 @@ TEST(MihIndex, ProbesEveryBucketWithinTheRadius) {
 
 TEST(MihIndex, KeepsOneEntryPerKeyframePerBucket) {
   std::mt19937_64 rng(1);
-  MihIndex index(uncapped(16, 0));
+  MihIndex index(uncapped(16, 0), kOrbBits);
   const Descriptor d = test::randomDescriptor(rng);
   const DescriptorList copies(200, d);
   index.insertKeyframe(copies.data(), copies.size(), 0);
@@ -92,7 +93,7 @@ TEST(MihIndex, DiscardsBucketsOverTheirCapAndStopsGrowingThem) {
   p.num_tables = 16;
   p.min_bucket_cap = 5;
   p.bucket_cap_factor = 1e-9;  // the floor decides
-  MihIndex index(p);
+  MihIndex index(p, kOrbBits);
   const Descriptor common = test::randomDescriptor(rng);
   for (FeatureId k = 0; k < 5; ++k) index.insertKeyframe(&common, 1, k);
   EXPECT_EQ(index.discardedBuckets(), 0u);
@@ -114,7 +115,7 @@ TEST(MihIndex, DefaultCapFollowsThePaperFormula) {
   // N_buckets = 50 * N_features / 2^16 with N_features = 1.31M gives 1000 entries.
   MihParams p;
   p.expected_features = 1310720;
-  MihIndex index(p);
+  MihIndex index(p, kOrbBits);
   Descriptor common;
   for (FeatureId k = 0; k < 1000; ++k) index.insertKeyframe(&common, 1, k);
   EXPECT_EQ(index.discardedBuckets(), 0u);
@@ -126,7 +127,7 @@ TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
   std::mt19937_64 rng(9);
   MihParams p = uncapped(16, 0);
   p.max_bucket_entries = 4;
-  MihIndex index(p);
+  MihIndex index(p, kOrbBits);
   const Descriptor d = test::randomDescriptor(rng);
   for (FeatureId k = 0; k < 10; ++k) index.insertKeyframe(&d, 1, k);
   index.deferMerges(false);  // merge now: over-the-bound recent entries are dropped there
@@ -145,28 +146,66 @@ TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
 
 TEST(MihIndex, IgnoresIdsAtOrBeyondTheLimit) {
   std::mt19937_64 rng(5);
-  MihIndex index(uncapped(16, 0));
+  MihIndex index(uncapped(16, 0), kOrbBits);
   const Descriptor d = test::randomDescriptor(rng);
   for (FeatureId k = 0; k < 10; ++k) index.insertKeyframe(&d, 1, k);
   EXPECT_EQ(visited(index, d, 4), (std::set<FeatureId>{0, 1, 2, 3}));
 }
 
+// BRISK's 512 bits: the automatic table count keeps 16-bit substrings (32 tables), and the
+// pigeonhole guarantee holds at the wider width as at 256 bits.
+TEST(MihIndex, WideDescriptorsGetSixteenBitTablesAndTheSameGuarantee) {
+  std::mt19937_64 rng(12);
+  MihParams p;
+  p.cap_buckets = false;
+  ASSERT_EQ(p.num_tables, 0);  // automatic
+  MihIndex index(p, 512);
+  ASSERT_EQ(index.layout().count(), 32);
+  for (int t = 0; t < 32; ++t) EXPECT_EQ(index.layout().length(t), 16);
+  const Descriptor base = test::randomDescriptor(rng, 64);
+  DescriptorList stored;
+  for (int d = 0; d < 32 + 40; ++d) stored.push_back(test::flipRandomBits(base, d, rng));
+  for (size_t i = 0; i < stored.size(); ++i) index.insertKeyframe(&stored[i], 1, static_cast<FeatureId>(i));
+  const std::set<FeatureId> found = visited(index, base);
+  for (size_t i = 0; i < stored.size(); ++i) {
+    bool meets = false;
+    for (int t = 0; t < 32; ++t) meets |= index.meetsInTable(base, stored[i], t);
+    if (hammingDistance(base, stored[i]) < 32) {
+      ASSERT_TRUE(meets) << i;
+    }
+    ASSERT_EQ(found.count(static_cast<FeatureId>(i)) == 1, meets) << i;
+  }
+  // The bits past 256 take part: flipping only them still separates the descriptors.
+  Descriptor high = base;
+  for (int b = 256; b < 512; b += 2) high.flip(b);
+  EXPECT_EQ(hammingDistance(base, high), 128);
+  EXPECT_EQ(MihIndex(p, 256).layout().count(), 16);  // and ORB keeps the paper's 16
+  EXPECT_EQ(MihIndex(p, 488).layout().count(), 31);  // AKAZE's 61 bytes
+}
+
 TEST(MihIndex, RejectsInvalidParameters) {
+  {
+    MihParams wide;
+    wide.num_tables = 4;  // 128-bit substrings of a 512-bit descriptor: longer than a word
+    EXPECT_THROW((MihIndex{wide, 512}), InvalidInput);
+    wide.num_tables = 8;
+    EXPECT_NO_THROW((MihIndex{wide, 512}));
+  }
   MihParams p;
   p.num_tables = 2;
-  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  EXPECT_THROW((MihIndex{p, kOrbBits}), InvalidInput);
   p = MihParams{};
   p.radius = 4;
-  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  EXPECT_THROW((MihIndex{p, kOrbBits}), InvalidInput);
   p = MihParams{};
   p.radius = -1;
-  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  EXPECT_THROW((MihIndex{p, kOrbBits}), InvalidInput);
   p = MihParams{};
   p.bucket_cap_factor = 0;
-  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  EXPECT_THROW((MihIndex{p, kOrbBits}), InvalidInput);
   p = MihParams{};
   p.max_bucket_entries = 1;
-  EXPECT_THROW(MihIndex{p}, InvalidInput);
+  EXPECT_THROW((MihIndex{p, kOrbBits}), InvalidInput);
 }
 
 }  // namespace

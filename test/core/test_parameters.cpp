@@ -1,7 +1,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <fstream>
 #include <set>
+#include <sstream>
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/params/parameters.hpp"
@@ -10,6 +12,67 @@ namespace mild {
 namespace {
 
 std::string configPath(const std::string& name) { return std::string(MILD_SOURCE_DIR) + "/config/" + name; }
+
+TEST(Parameters, DefaultYamlIsGeneratedFromTheDeclarations) {
+  std::ifstream in(configPath("default.yaml"));
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_EQ(text.str(), parameterYaml(DetectorParams{}))
+      << "config/default.yaml differs from the declarations: regenerate it with "
+         ".build/devel/lib/mild_lcd/mild_offline --print-config > config/default.yaml";
+}
+
+TEST(Parameters, TheReadmeTableIsTheDeclaration) {
+  std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
+  std::stringstream readme;
+  readme << in.rdbuf();
+  EXPECT_NE(readme.str().find(parameterMarkdown()), std::string::npos)
+      << "README.md's detector parameter table is out of date; `mild_offline --help-parameters` prints it:\n"
+      << parameterMarkdown();
+}
+
+TEST(Parameters, BoundsComeFromTheDeclarationAndNameTheParameter) {
+  // The message is built from the declared bounds, whichever struct validates.
+  MihParams index;
+  index.num_tables = 3;
+  try {
+    index.validate();
+    FAIL();
+  } catch (const InvalidInput& e) {
+    EXPECT_STREQ(e.what(), "index/num_tables must be 0 or [4, 64], got 3");
+  }
+  FilterParams filter;
+  filter.motion_kernel = {0.5, -1.0};
+  try {
+    filter.validate();
+    FAIL();
+  } catch (const InvalidInput& e) {
+    EXPECT_STREQ(e.what(), "filter/motion_kernel must list 1 to 64 numbers, each >= 0, got the item -1");
+  }
+  FeatureParams features;
+  features.type = "sift";
+  EXPECT_THROW(features.validate(), InvalidInput);
+  // Each declared parameter's default lies within its bounds, and every bound is checked: a value
+  // outside is refused with the parameter's name.
+  const DetectorParams defaults;
+  EXPECT_NO_THROW(defaults.validate());
+  size_t declared = 0;
+  visitParameters(defaults, [&](const std::string& name, const auto& field, const Bounds& bounds, const char* doc) {
+    ++declared;
+    EXPECT_GT(std::string(doc).size(), 10u) << name << " needs a meaning";
+    EXPECT_NO_THROW(bounds.check(name, field)) << name;
+  });
+  EXPECT_EQ(declared, describeParameters(defaults).size());
+  // The runtime set is what the declarations mark, and only candidate, verification and scoring
+  // parameters are in it.
+  const auto& runtime = runtimeParameterNames();
+  EXPECT_EQ(runtime.size(), 10u);
+  for (const std::string& name : runtime) {
+    EXPECT_TRUE(name.rfind("detector/", 0) == 0 || name.rfind("verification/", 0) == 0 ||
+                name.rfind("scoring/", 0) == 0)
+        << name;
+  }
+}
 
 TEST(Parameters, DefaultYamlDocumentsEveryParameterWithItsBuiltInDefault) {
   const YamlParameterSource yaml = YamlParameterSource::fromFile(configPath("default.yaml"));
@@ -35,7 +98,7 @@ detector:
   exclusion_seconds: 2.5
 )");
   const DetectorParams p = loadDetectorParams(source);
-  EXPECT_EQ(p.orb.num_features, 500);
+  EXPECT_EQ(p.features.orb.num_features, 500);
   EXPECT_EQ(p.database.index.num_tables, 24);
   EXPECT_EQ(p.database.index.radius, 1);
   EXPECT_EQ(p.search, SearchMode::kExact);
@@ -72,6 +135,14 @@ TEST(Parameters, RejectsBadValuesNamingTheParameter) {
   expectRejected("orb: [1, 2]", "orb");
   expectRejected("orb: {num_features: [1, 2]", "test.yaml");  // not YAML
   expectRejected("- 1\n- 2\n", "top level");
+  expectRejected("features: {type: sift}", "features/type");
+  expectRejected("features: {descriptor_bytes: 4}", "features/descriptor_bytes");
+  expectRejected("brisk: {threshold: 0}", "brisk/threshold");
+  expectRejected("akaze: {threshold: 2}", "akaze/threshold");
+  // Width-dependent: 20-bit substrings at most for sparse match, 64 for the index.
+  expectRejected("features: {type: brisk}\nverification: {num_tables: 22}", "verification/num_tables");
+  expectRejected("features: {type: brisk}\nindex: {num_tables: 4}",
+                 "index/num_tables must be 0 (automatic) or at least 8 for 512-bit");
 }
 
 TEST(Parameters, IgnoresNamesOutsideTheDetectorsNamespaces) {

@@ -12,7 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
 #include "mild_lcd/verification/geometric_verifier.hpp"

@@ -5,7 +5,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/verification/geometric_verifier.hpp"
 #include "mild_lcd/verification/sparse_matcher.hpp"
 #include "random_descriptors.hpp"
@@ -143,7 +143,16 @@ TEST(SparseMatcher, ReusedBuffersNeverLeakIntoTheNextPair) {
 
 TEST(SparseMatcher, RejectsInvalidParameters) {
   SparseMatchParams p;
-  p.num_tables = 8;  // 32-bit substrings: no directly addressed table
+  p.num_tables = 8;  // 32-bit substrings of ORB: no directly addressed table
+  EXPECT_THROW(p.validateFor(256), InvalidInput);
+  std::mt19937_64 rng(3);
+  const DescriptorList orb = test::randomDescriptors(10, rng);
+  SparseMatcher eight(p);
+  EXPECT_THROW(eight.match(orb, orb), InvalidInput);
+  p.num_tables = 22;  // fine for ORB, 24-bit substrings of BRISK
+  EXPECT_NO_THROW(p.validateFor(256));
+  EXPECT_THROW(p.validateFor(512), InvalidInput);
+  p.num_tables = 65;
   EXPECT_THROW(SparseMatcher{p}, InvalidInput);
   p = SparseMatchParams{};
   p.ratio = 1.5;
@@ -151,6 +160,26 @@ TEST(SparseMatcher, RejectsInvalidParameters) {
   p = SparseMatchParams{};
   p.radius = 3;
   EXPECT_THROW(SparseMatcher{p}, InvalidInput);
+}
+
+// BRISK-width (512-bit) descriptors: the automatic table count keeps 12-bit substrings (43 tables),
+// and matching finds the same pairs as brute force on near copies. Two widths in one pair are refused.
+TEST(SparseMatcher, MatchesWideDescriptorsAndRefusesMixedWidths) {
+  std::mt19937_64 rng(17);
+  const DescriptorList train = test::randomDescriptors(300, rng, 64);
+  DescriptorList query;
+  for (int i = 0; i < 300; ++i) query.push_back(test::flipRandomBits(train[(i * 7) % 300], 20, rng));
+  SparseMatcher matcher;
+  const std::vector<FeatureMatch> matches = matcher.match(query, train);
+  ASSERT_EQ(matches.size(), 300u);  // 20 of 512 bits: every copy shares a 12-bit substring
+  for (const FeatureMatch& m : matches) {
+    EXPECT_EQ(m.train, (m.query * 7) % 300);
+    EXPECT_EQ(m.distance, 20);
+  }
+  // The same matcher goes back to ORB's width, and refuses a pair of two widths.
+  const DescriptorList orb = test::randomDescriptors(50, rng);
+  EXPECT_EQ(matcher.match(orb, orb).size(), 50u);
+  EXPECT_THROW(matcher.match(orb, train), InvalidInput);
 }
 
 Features fixtureFeatures(int frame) {

@@ -3,20 +3,31 @@
 // the fuzzer explores what a publisher can send, not roscpp's own wire decoder.
 #include <fuzzer/FuzzedDataProvider.h>
 
+#include <memory>
+#include <vector>
+
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 
 namespace {
 
-mild::LoopDetector& detector() {
-  static mild::LoopDetector d = [] {
-    mild::DetectorParams p;
-    p.database.index.expected_features = 10000;
-    p.candidates.exclusion_frames = 2;
-    return mild::LoopDetector(p);
+// One detector per feature source: images go through ORB, BRISK or AKAZE (their pyramids and
+// borders fail differently on tiny images), keyframes of any descriptor_bytes meet a 32- or
+// 64-byte database.
+mild::LoopDetector& detector(int which) {
+  static std::vector<std::unique_ptr<mild::LoopDetector>> detectors = [] {
+    std::vector<std::unique_ptr<mild::LoopDetector>> out;
+    for (const char* type : {"orb", "brisk", "akaze"}) {
+      mild::DetectorParams p;
+      p.features.type = type;
+      p.database.index.expected_features = 10000;
+      p.candidates.exclusion_frames = 2;
+      out.push_back(std::make_unique<mild::LoopDetector>(p));
+    }
+    return out;
   }();
-  return d;
+  return *detectors[static_cast<size_t>(which)];
 }
 
 mild_lcd::KeyPoint keypoint(FuzzedDataProvider& in) {
@@ -42,7 +53,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       msg.header.stamp.sec = in.ConsumeIntegral<uint32_t>();
       const size_t n = in.ConsumeIntegralInRange<size_t>(0, 64);
       for (size_t i = 0; i < n; ++i) msg.keypoints.push_back(keypoint(in));
-      msg.descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 64 * 33));
+      msg.descriptor_bytes = in.ConsumeBool() ? 0 : in.ConsumeIntegralInRange<uint32_t>(0, 80);
+      msg.descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 64 * 65));
       if (in.ConsumeBool()) {  // intrinsics: K[0], K[4], K[2], K[5] any double (zero, negative, NaN, huge)
         for (size_t k : {0, 4, 2, 5}) msg.camera_info.K[k] = in.ConsumeFloatingPoint<double>();
       }
@@ -53,8 +65,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const mild::Features f = mild_lcd::featuresFromMsg(msg);
       std::optional<uint64_t> id;
       if (msg.has_id) id = msg.id;
-      detector().process(f, msg.header.stamp.toSec(), id);
+      detector(in.ConsumeBool() ? 1 : 0).process(f, msg.header.stamp.toSec(), id);
     } else {
+      const int which = in.ConsumeIntegralInRange<int>(0, 2);
       sensor_msgs::Image msg;
       msg.encoding = in.PickValueInArray<std::string>(
           {"mono8", "bgr8", "rgb8", "bgra8", "rgba8", "mono16", "16UC1", "32FC1", "8UC1", "yuv422", ""});
@@ -64,7 +77,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       msg.is_bigendian = in.ConsumeBool();
       msg.data = in.ConsumeRemainingBytes<uint8_t>();
       const mild_lcd::DecodedImage image = mild_lcd::imageFromMsg(msg);
-      detector().process(image.image, image.format, 0.0);
+      detector(which).process(image.image, image.format, 0.0);
     }
   } catch (const mild::Error&) {
   }

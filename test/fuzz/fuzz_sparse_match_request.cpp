@@ -13,8 +13,8 @@ mild::Features storedFeatures(uint64_t id) {
   std::mt19937_64 rng(id);
   mild::Features f;
   for (int i = 0; i < 40; ++i) {
-    mild::Descriptor d;
-    for (auto& w : d.words) w = rng();
+    mild::Descriptor d;  // ORB's 32 bytes: the words past them stay zero
+    for (int w = 0; w < d.numWords(); ++w) d.words[w] = rng();
     f.descriptors.push_back(d);
     f.keypoints.emplace_back(static_cast<float>(rng() % 320), static_cast<float>(rng() % 240), 7.0f);
   }
@@ -40,8 +40,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   request.query_id = in.ConsumeIntegralInRange<uint64_t>(0, 6);
   request.train_id = in.ConsumeIntegralInRange<uint64_t>(0, 6);
   request.use_descriptors = in.ConsumeBool();
-  request.query_descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 48 * 32 + 5));
-  request.train_descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 48 * 32 + 5));
+  request.descriptor_bytes = in.ConsumeBool() ? 0 : in.ConsumeIntegralInRange<uint32_t>(0, 80);
+  request.query_descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 48 * 64 + 5));
+  request.train_descriptors = in.ConsumeBytes<uint8_t>(in.ConsumeIntegralInRange<size_t>(0, 48 * 64 + 5));
   request.query_keypoints = keypoints(in);
   request.train_keypoints = keypoints(in);
   const auto stored = [](uint64_t id) -> std::optional<mild::Features> {

@@ -39,7 +39,8 @@ constexpr size_t kFixtureFrames = 60;
 constexpr double kDecision = 0.5;
 constexpr double kReplayTimeout = 120.0;
 
-const std::string kFixtureBag = std::string(MILD_BAG_DIR) + "/fixture_corridor.bag";
+// ~bag: the fixture bag to replay (file name in MILD_BAG_DIR), fixture_corridor.bag by default.
+std::string fixtureBag() { return std::string(MILD_BAG_DIR) + "/" + privateParam("bag", "fixture_corridor.bag"); }
 const std::string kFixtureDir = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
 
 int idOffset() {
@@ -99,7 +100,7 @@ class Replay : public ::testing::Test {
     outputs_ = std::make_unique<TopicLog<mild_lcd::LoopClosure>>("loop_closure");
     debug_images_ = std::make_unique<TopicLog<sensor_msgs::Image>>("debug_image", 100);
     ASSERT_TRUE(outputs_->waitForPublisher(30.0)) << "the nodelet never advertised loop_closure";
-    ASSERT_EQ(playBag(kFixtureBag, privateParam("topic"), "-r 4"), 0) << "rosbag play failed";
+    ASSERT_EQ(playBag(fixtureBag(), privateParam("topic"), "-r 4"), 0) << "rosbag play failed";
     outputs_->waitForCount(kFixtureFrames, kReplayTimeout);
   }
   static void TearDownTestSuite() {
@@ -341,6 +342,40 @@ TEST(KeyframeIds, AreAssignedWhenMissingAndPublishedBack) {
   EXPECT_EQ(response.matches.size(), 1u);
 }
 
+// A node whose database holds 64-byte (BRISK) descriptors: a Keyframe of ORB's 32 bytes per
+// keypoint is rejected and counted, and one of its own width is processed after it.
+TEST(KeyframeWidth, AKeyframeOfAnotherWidthIsRejectedAndCounted) {
+  ros::NodeHandle nh;
+  ros::Publisher keyframes = nh.advertise<mild_lcd::Keyframe>("/camera/keyframe", 10);
+  TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
+  ASSERT_TRUE(outputs.waitForPublisher(10.0));
+  ASSERT_TRUE(waitForSubscriber(keyframes, 10.0));
+  const std::string rejected_before = diagnosticValue("rejected keyframes", "(the latest)", 3.0);
+  mild_lcd::Keyframe orb;
+  orb.header.stamp = ros::Time(8000.0);
+  orb.keypoints.resize(20);
+  for (size_t i = 0; i < orb.keypoints.size(); ++i) orb.keypoints[i].x = orb.keypoints[i].y = 10.0f + i;
+  orb.descriptors.assign(20 * 32, 0x3C);
+  orb.descriptor_bytes = 32;
+  keyframes.publish(orb);
+  mild_lcd::Keyframe undeclared = orb;  // 0 = 32 bytes: the same
+  undeclared.descriptor_bytes = 0;
+  keyframes.publish(undeclared);
+  mild_lcd::Keyframe brisk = orb;
+  brisk.descriptors.assign(20 * 64, 0x3C);
+  brisk.descriptor_bytes = 64;
+  brisk.header.stamp = ros::Time(8001.0);
+  keyframes.publish(brisk);
+  ASSERT_TRUE(outputs.waitForCount(1, 20.0)) << "the 64-byte keyframe after the refused ones was not processed";
+  ros::WallDuration(0.5).sleep();
+  const auto msgs = outputs.messages();
+  ASSERT_EQ(msgs.size(), 1u) << "a keyframe of another width must not be answered";
+  EXPECT_NEAR(msgs[0].header.stamp.toSec(), 8001.0, 1e-6);
+  EXPECT_EQ(msgs[0].features, 20);
+  const int expected = std::stoi(rejected_before.empty() ? "0" : rejected_before) + 2;
+  EXPECT_EQ(diagnosticValue("rejected keyframes", std::to_string(expected), 10.0), std::to_string(expected));
+}
+
 // ---------------------------------------------------------------------------------------------
 // reset, last: it empties the database the other suites use.
 
@@ -377,7 +412,7 @@ std::vector<mild_lcd::LoopClosure> replayOnce(const std::string& rate_args) {
   EXPECT_TRUE(ros::service::call("reset", trigger));
   TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
   EXPECT_TRUE(outputs.waitForPublisher(30.0));
-  EXPECT_EQ(playBag(kFixtureBag, privateParam("topic"), rate_args), 0);
+  EXPECT_EQ(playBag(fixtureBag(), privateParam("topic"), rate_args), 0);
   EXPECT_TRUE(outputs.waitForCount(kFixtureFrames, kReplayTimeout));
   ros::WallDuration(0.5).sleep();
   return outputs.messages();

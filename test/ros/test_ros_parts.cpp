@@ -139,8 +139,9 @@ class Store : public ::testing::Test {
     for (size_t k = 0; k < keyframes; ++k) {
       mild::Features f;
       for (int i = 0; i < 200; ++i) {
-        mild::Descriptor desc;
-        for (auto& w : desc.words) w = (static_cast<uint64_t>(rng.next()) << 32) | rng.next();
+        mild::Descriptor desc;  // ORB's 32 bytes
+        for (int w = 0; w < desc.numWords(); ++w)
+          desc.words[w] = (static_cast<uint64_t>(rng.next()) << 32) | rng.next();
         f.descriptors.push_back(desc);
         f.keypoints.emplace_back(1.0f * i, 1.0f * k, 7.0f);
       }
@@ -365,7 +366,7 @@ TEST(Conversions, TheRelativePoseIsPublishedAsAUnitQuaternionAndDirection) {
 TEST(Conversions, AKeyframesCameraInfoAndDepthsReachTheCore) {
   mild_lcd::Keyframe msg;
   msg.keypoints.resize(2);
-  msg.descriptors.assign(2 * mild::kDescriptorBytes, 0x5A);
+  msg.descriptors.assign(2 * mild::kOrbDescriptorBytes, 0x5A);
   msg.camera_info.K = {256.0, 0.0, 159.5, 0.0, 250.0, 119.5, 0.0, 0.0, 1.0};
   msg.depths = {1.5f, std::nanf("")};
   const mild::Features f = featuresFromMsg(msg);

@@ -10,8 +10,9 @@
 #include <opencv2/core.hpp>
 
 #include "mild_lcd/detector/candidate_scorer.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/filter/temporal_filter.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
 #include "mild_lcd/verification/candidate_verifier.hpp"
 #include "mild_lcd/verification/geometric_verifier.hpp"
@@ -19,27 +20,50 @@
 namespace mild {
 
 struct CandidateParams {
-  // Temporal exclusion: keyframes closer than this to the query (in keyframes, or in seconds when
-  // > 0) are never candidates, and take no part in the similarity (they would dominate it).
   int exclusion_frames = 40;
   double exclusion_seconds = 0.0;
-  // Beyond it, the near-past band (NearPastRule in keyframe_database.hpp): the newest keyframes
-  // that still share the query's view are excluded too, however many they are.
   bool near_past = true;
   double near_past_kappa = 2.0;
   int near_past_tolerance = 2;
   int near_past_min_background = 30;
-  // At most this many candidates per keyframe, each a local maximum of the loop probability over
-  // +- suppression_radius keyframes, with probability >= min_probability.
   int max_candidates = 3;
   int suppression_radius = 5;
   double min_probability = 0.0;
 
-  void validate() const;
+  static constexpr const char* kSection = "detector";
+  template <class Self, class Visit>
+  static void declare(Self& p, Visit&& v) {
+    v("exclusion_frames", p.exclusion_frames, Bounds::atLeast(0).runtime(),
+      "Temporal exclusion: keyframes fewer than exclusion_frames keyframes before the query are never candidates "
+      "and take no part in the similarity (they trivially look alike). 40 = the bench's evaluation gap (the "
+      "original code used 60).");
+    v("exclusion_seconds", p.exclusion_seconds, Bounds::atLeast(0).runtime(),
+      "When > 0, also those fewer than this many seconds before the query.");
+    v("near_past", p.near_past, Bounds::any(),
+      "The near-past band: beyond the exclusion, the newest keyframes that still share the query's view (far "
+      "buildings seen while walking towards them) are excluded too, as far back as the number of query features "
+      "matched in them stays above the background level of older keyframes (median + near_past_kappa x 1.4826 "
+      "MAD over the newest 400 eligible ones).");
+    v("near_past_kappa", p.near_past_kappa, Bounds::atLeast(0), "The band's threshold above the background, in MADs.");
+    v("near_past_tolerance", p.near_past_tolerance, Bounds::atLeast(0),
+      "Keyframes below the level allowed in a row before the band ends.");
+    v("near_past_min_background", p.near_past_min_background, Bounds::atLeast(1),
+      "Until this many keyframes of the session are eligible there is no background, and none is a candidate.");
+    v("max_candidates", p.max_candidates, Bounds::atLeast(1).runtime(),
+      "Up to this many candidates per keyframe, local maxima of the loop probability at least suppression_radius "
+      "keyframes apart, best first.");
+    v("suppression_radius", p.suppression_radius, Bounds::atLeast(0).runtime(), "See max_candidates.");
+    v("min_probability", p.min_probability, Bounds::probability().runtime(),
+      "Candidates below this (calibrated) loop probability are not reported. 0 reports every keyframe's best "
+      "candidates, which precision-recall evaluation needs; for a hard decision use LoopCandidate.accepted "
+      "(scoring/decision_probability).");
+  }
+  void validate() const { validateDeclared(*this); }
 };
 
 struct DetectorParams {
-  OrbParams orb;
+  FeatureParams features;
+  // database.descriptor_bytes is not read: the detector's database takes its width from `features`.
   DatabaseParams database;
   FilterParams filter;
   CandidateParams candidates;
@@ -47,6 +71,8 @@ struct DetectorParams {
   ScoringParams scoring;
   SearchMode search = SearchMode::kIndex;
 
+  // The database parameters the detector runs with: `database` at the features' width.
+  DatabaseParams databaseParams() const;
   void validate() const;
 };
 
@@ -93,7 +119,8 @@ struct KeyframeRecord {
 
 // Everything a detector has learnt, as plain data: what database_file.hpp saves and loads.
 struct DetectorState {
-  std::string parameters;  // "name: value" lines of the detector that saved it (describeParameters)
+  std::string parameters;                      // "name: value" lines of the detector that saved it (describeParameters)
+  int descriptor_bytes = kOrbDescriptorBytes;  // the width of every descriptor below
   uint64_t next_id = 0;
   KeyframeIndex session_start = 0;
   std::vector<KeyframeRecord> records;      // in database order
@@ -141,13 +168,15 @@ class LoopDetector {
   bool verifies() const { return verifier_ != nullptr; }
 
   // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image, an
-  // id already in the database or above kMaxKeyframeId. Without an id, the next free one (largest so
+  // id already in the database or above kMaxKeyframeId, or when features/descriptor_bytes differs
+  // from what the extractor produces. Without an id, the next free one (largest so
   // far + 1) is used; CapacityError once that would pass kMaxKeyframeId.
   // `camera`: the image's intrinsics when known (they give verified loops a relative pose).
   DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
                           std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {});
-  // Same, for features computed elsewhere (e.g. by the SLAM front-end). Their camera is stored with
-  // the keyframe; their depths serve this query's verification only.
+  // Same, for features computed elsewhere (e.g. by the SLAM front-end). Their descriptors must have
+  // the database's width (descriptorBytes()). Their camera is stored with the keyframe; their depths
+  // serve this query's verification only.
   DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
 
   // Replaces everything the detector has learnt by `state` (the index is rebuilt from the
@@ -177,6 +206,9 @@ class LoopDetector {
   // (continue_session keeps the saved run's).
   uint32_t session() const { return session_; }
 
+  // The width of the descriptors this detector stores and accepts, in bytes.
+  int descriptorBytes() const { return database_.descriptorBytes(); }
+  const FeatureExtractor& extractor() const { return *extractor_; }
   size_t size() const { return records_.size(); }
   const KeyframeDatabase& database() const { return database_; }
   const TemporalFilter& filter() const { return *filter_; }
@@ -190,6 +222,7 @@ class LoopDetector {
 
  private:
   void checkId(std::optional<uint64_t> id) const;
+  void checkWidth(const DetectorState& state) const;  // throws InvalidInput for another descriptor width
   // Checks `state` and builds its database; session_start and session as given, the filter fresh
   // or from the state.
   PreparedRestore build(DetectorState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
@@ -198,7 +231,7 @@ class LoopDetector {
                                               const std::vector<double>& similarity) const;
 
   DetectorParams params_;
-  OrbExtractor extractor_;
+  std::unique_ptr<FeatureExtractor> extractor_;
   KeyframeDatabase database_;
   std::unique_ptr<TemporalFilter> filter_;
   CandidateScorer scorer_;

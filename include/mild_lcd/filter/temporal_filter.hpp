@@ -11,18 +11,41 @@
 #include <string>
 #include <vector>
 
+#include "mild_lcd/params/parameter_spec.hpp"
+
 namespace mild {
 
+// The names filter/type accepts.
+const std::vector<std::string>& temporalFilterTypes();
+
 struct FilterParams {
-  // "exclusive_hypotheses" (the default: ExclusiveHypothesisFilter) or "independent_binary" (the
-  // 2017 MILD design: IndependentBinaryFilter).
   std::string type = "exclusive_hypotheses";
   double loop_persistence = 0.95;
   double loop_onset = 0.01;
-  std::vector<double> motion_kernel = {0.3, 1.0, 0.6};  // weights of advancing 0, 1, 2 keyframes
+  std::vector<double> motion_kernel = {0.3, 1.0, 0.6};
   double no_loop_likelihood = 8.0;
   int candidate_window = 3;
 
+  static constexpr const char* kSection = "filter";
+  template <class Self, class Visit>
+  static void declare(Self& p, Visit&& v) {
+    v("type", p.type, Bounds::oneOf(temporalFilterTypes()),
+      "The temporal filter: exclusive_hypotheses (the default; filter/exclusive_hypothesis_filter.hpp) or "
+      "independent_binary (the 2017 MILD design, for comparison). A saved run is only resumed by the filter type "
+      "that wrote it.");
+    v("loop_persistence", p.loop_persistence, Bounds::probability(),
+      "P(a loop continues from one keyframe to the next).");
+    v("loop_onset", p.loop_onset, Bounds::probability(),
+      "P(a loop starts at this keyframe), spread evenly over the eligible keyframes.");
+    v("motion_kernel", p.motion_kernel, Bounds::list(1, 64, Bounds::atLeast(0)),
+      "Where the matched keyframe moves per new keyframe: weights of advancing 0, 1, 2, ... keyframes along the "
+      "old trajectory (at least one positive). Revisits advance; aliasing tends to stay on one stored keyframe.");
+    v("no_loop_likelihood", p.no_loop_likelihood, Bounds::above(0),
+      "Likelihood of \"no loop\", in units of robust saliency (z). Queries without a loop reach a maximum z of "
+      "5-9 (median) on the bench, loop queries 60-70; 8-10 is a flat optimum.");
+    v("candidate_window", p.candidate_window, Bounds::atLeast(0),
+      "A candidate's loop probability is the posterior mass within +-candidate_window keyframes.");
+  }
   void validate() const;  // throws InvalidInput naming the first invalid field
 };
 
@@ -51,7 +74,6 @@ class TemporalFilter {
 
 // The filter params.type names; throws InvalidInput for an unknown type.
 std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params);
-const std::vector<std::string>& temporalFilterTypes();
 
 // Robust standardisation of a similarity vector: (s - median) / (1.4826 MAD), falling back to the
 // mean absolute deviation from the median when more than half the values are equal, and to all

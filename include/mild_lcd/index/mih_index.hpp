@@ -8,36 +8,53 @@
 #include "mild_lcd/common/types.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/substring_layout.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
 
 namespace mild {
 
 struct MihParams {
-  // m: number of hash tables, one per substring (seed paper: 16 for loop closure, 24 for sparse match).
-  int num_tables = 16;
-  // r: every bucket within Hamming distance r of the query's substring is probed (0..3).
-  int radius = 0;
-  // Bucket caps (seed paper III.D): a bucket holding more than
-  //   max(min_bucket_cap, bucket_cap_factor * N_features / 2^substring_bits)
-  // entries is discarded: emptied, ignored at query time and never grown again. N_features is
-  // max(expected_features, features currently stored), so the cap never shrinks.
+  int num_tables = 0;  // m
+  int radius = 0;      // r
   bool cap_buckets = true;
   double bucket_cap_factor = 50.0;
   uint64_t expected_features = 1000000;
   uint32_t min_bucket_cap = 64;
-  // Bounded query time as the map grows (0 = off, the default): a bucket keeps only its newest
-  // max_bucket_entries entries, older ones give way as new ones arrive, so a probe never reads more
-  // than about this many ids per bucket however large the map. Common substrings then reach back a
-  // bounded number of keyframes, distinctive (rare) ones to the start of the map. Measured in the
-  // README ("Beyond linear growth").
   uint32_t max_bucket_entries = 0;
-  // Each entry also holds its feature's first 64 bits (what early termination tests), so a query
-  // reads every bucket as one sequential run instead of one random read per candidate. Costs 8
-  // bytes per entry (about 8 x num_tables bytes per stored feature); results are the same.
-  // Measured in the README ("Speed").
   bool inline_prefixes = false;
 
-  // Throws InvalidInput naming the first invalid field.
-  void validate() const;
+  static constexpr int kMaxRadius = 3;
+  static constexpr const char* kSection = "index";
+  template <class Self, class Visit>
+  static void declare(Self& p, Visit&& v) {
+    v("num_tables", p.num_tables, Bounds::in(SubstringLayout::kMinSubstrings, SubstringLayout::kMaxSubstrings).orZero(),
+      "m: hash tables, one per substring of the descriptor (seed paper: 16 for ORB). 0 = one per 16 bits (16 for "
+      "ORB's 256 bits, 32 for BRISK's 512), so that every table is a directly addressed array of 65,536 buckets.");
+    v("radius", p.radius, Bounds::in(0, kMaxRadius),
+      "r: multi-probe radius; every bucket within Hamming distance r of the query's substring is probed. r = 1 "
+      "probes 17 buckets per table instead of 1.");
+    v("cap_buckets", p.cap_buckets, Bounds::any(),
+      "Bucket caps (burstiness, seed paper III.D): a bucket holding more than max(min_bucket_cap, "
+      "bucket_cap_factor * N / 2^substring_bits) entries is discarded (emptied and ignored), where N = "
+      "max(expected_features, features stored).");
+    v("bucket_cap_factor", p.bucket_cap_factor, Bounds::above(0), "The cap's multiple of the average bucket length.");
+    v("expected_features", p.expected_features, Bounds::atLeast(0), "N before the map holds that many features.");
+    v("min_bucket_cap", p.min_bucket_cap, Bounds::atLeast(1), "The cap never goes below this.");
+    v("max_bucket_entries", p.max_bucket_entries, Bounds::atLeast(2).orZero(),
+      "Bounded query time for very large maps (0 = off): a bucket keeps only its newest max_bucket_entries "
+      "entries, so a query reads at most about m * max_bucket_entries ids per feature however large the map "
+      "grows; old places stay findable through their rare substrings. README \"Beyond linear growth\" measures "
+      "its cost in recall.");
+    v("inline_prefixes", p.inline_prefixes, Bounds::any(),
+      "Each index entry also holds its feature's first 64 bits, so that early termination reads each bucket "
+      "sequentially instead of one random read per candidate: the same results, 8 bytes more per entry (about 128 "
+      "per stored feature with 16 tables). README \"Speed\" measures the trade.");
+  }
+  static constexpr int kAutoSubstringBits = 16;
+  // The table count for descriptors of `bits` bits: num_tables, or the automatic choice.
+  int tablesFor(int bits) const {
+    return num_tables > 0 ? num_tables : SubstringLayout::substringsFor(bits, kAutoSubstringBits);
+  }
+  void validate() const { validateDeclared(*this); }
 };
 
 // Work done by one probe pass, summed over query features.
@@ -59,7 +76,9 @@ struct ProbeCounters {
 // no bucket carries the spare capacity (or the 24-byte header) of a vector of its own.
 class MihIndex {
  public:
-  explicit MihIndex(const MihParams& params);
+  // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit
+  // that width (substrings longer than 64 bits).
+  MihIndex(const MihParams& params, int bits);
 
   const MihParams& params() const { return params_; }
   const SubstringLayout& layout() const { return layout_; }
@@ -68,6 +87,7 @@ class MihIndex {
   // Intra-image burstiness: a bucket keeps at most one entry per keyframe, so a feature whose bucket
   // already holds an entry of this keyframe is not added to that table (it can still be found
   // through the other tables).
+  // Every descriptor must have the index's width (callers check).
   void insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id);
 
   // Bulk loading: while deferred, recent entries are merged into the contiguous runs rarely (each

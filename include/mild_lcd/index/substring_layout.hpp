@@ -7,17 +7,24 @@
 
 namespace mild {
 
-// How a 256-bit descriptor is cut into m disjoint, contiguous substrings for multi-index hashing.
-// When m does not divide 256, the first (256 mod m) substrings are one bit longer than the others,
-// so lengths differ by at most one bit. Substrings longer than 64 bits are not supported (m >= 4).
+// How a descriptor of `bits` bits is cut into m disjoint, contiguous substrings for multi-index
+// hashing. When m does not divide the width, the first (bits mod m) substrings are one bit longer
+// than the others, so lengths differ by at most one bit. Substrings are 1 to 64 bits long, so m is
+// at least bits / 64 (4 for ORB's 256 bits, 8 for BRISK's 512).
 class SubstringLayout {
  public:
   static constexpr int kMinSubstrings = 4;
   static constexpr int kMaxSubstrings = 64;
+  static constexpr int kMaxSubstringBits = 64;
 
-  // Throws InvalidInput when num_substrings is outside [kMinSubstrings, kMaxSubstrings].
-  explicit SubstringLayout(int num_substrings);
+  // Throws InvalidInput when num_substrings is outside [kMinSubstrings, kMaxSubstrings], would cut
+  // substrings longer than 64 bits, or bits is not a supported descriptor width.
+  SubstringLayout(int num_substrings, int bits);
 
+  // The fewest substrings that cut `bits` into pieces of at most max_length bits.
+  static int substringsFor(int bits, int max_length) { return (bits + max_length - 1) / max_length; }
+
+  int bits() const { return bits_; }
   int count() const { return static_cast<int>(offsets_.size()); }
   int offset(int t) const { return offsets_[t]; }
   int length(int t) const { return lengths_[t]; }
@@ -31,8 +38,13 @@ class SubstringLayout {
     return v & e.mask;
   }
 
-  // The descriptor bits that substring t covers, as a 256-bit mask.
+  // The descriptor bits that substring t covers, as a mask of the layout's width.
   const Descriptor& mask(int t) const { return masks_[t]; }
+
+  // Multi-probe: for each substring length in use (index = length), the XOR masks of popcount <= r,
+  // i.e. the buckets within Hamming distance r of a substring. Shared by the MIH index and sparse
+  // match, so the two probe exactly alike.
+  std::vector<std::vector<uint64_t>> probeMasks(int radius) const;
 
  private:
   // Precomputed bit extraction per substring: key() is on every hot path.
@@ -42,6 +54,7 @@ class SubstringLayout {
     bool spans = false;  // continues into the next word
     uint64_t mask = 0;
   };
+  int bits_ = 0;
   std::vector<int> offsets_;
   std::vector<int> lengths_;
   std::vector<Descriptor> masks_;

@@ -4,7 +4,7 @@
 #include <utility>
 #include <vector>
 
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/features.hpp"
 #include "mild_lcd/index/mih_index.hpp"
 #include "mild_lcd/offline/mih_analysis.hpp"
 
@@ -30,18 +30,20 @@ struct FeaturePair {
 };
 
 struct MeasuredPriors {
-  std::vector<double> inlier_counts;   // 257 bins, d = 0..256
-  std::vector<double> outlier_counts;  // 257 bins
+  int bits = 256;                      // the views' descriptor width
+  std::vector<double> inlier_counts;   // bits + 1 bins, d = 0..bits
+  std::vector<double> outlier_counts;  // bits + 1 bins
   size_t overlapping_pairs_used = 0;   // overlapping pairs that reached min_inliers
   // Every inlier correspondence found (query descriptor, stored descriptor), for validating the
   // analysis against the real index.
   std::vector<std::pair<Descriptor, Descriptor>> inlier_descriptors;
 
-  DistancePrior inliers() const { return DistancePrior::fromCounts(inlier_counts); }
-  DistancePrior outliers() const { return DistancePrior::fromCounts(outlier_counts); }
+  DistancePrior inliers() const { return DistancePrior::fromCounts(inlier_counts, bits); }
+  DistancePrior outliers() const { return DistancePrior::fromCounts(outlier_counts, bits); }
 };
 
-// Throws InvalidInput when a view's keypoints and descriptors differ in number.
+// Any descriptor width, the same for every view. Throws InvalidInput when a view's keypoints and
+// descriptors differ in number, or views differ in width.
 MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping,
                                      const std::vector<FeaturePair>& disjoint,
                                      const PriorMeasurementParams& params = {});

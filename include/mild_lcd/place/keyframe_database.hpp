@@ -12,6 +12,9 @@
 #include "mild_lcd/place/similarity.hpp"
 
 namespace mild {
+namespace detail {
+struct DatabaseVote;  // a (query feature, stored feature) pair within d0 and its phi
+}  // namespace detail
 
 enum class SearchMode {
   kIndex,  // candidates from the MIH tables (the method)
@@ -59,37 +62,42 @@ struct QueryResult {
 };
 
 struct DatabaseParams {
+  // The width of the descriptors the database holds (32 bytes for ORB, 64 for BRISK, 61 for
+  // AKAZE). Not a parameter of its own: the detector takes it from its feature source.
+  int descriptor_bytes = kOrbDescriptorBytes;
   MihParams index;
   SimilarityParams similarity;
-  void validate() const {
-    index.validate();
-    similarity.validate();
-  }
+  void validate() const;
 };
 
 // The keyframe database: descriptors of every inserted keyframe, the MIH index over them, and
 // image similarity by voting. Keyframes are numbered 0, 1, 2, ... in insertion order.
 //
 // Descriptors are stored split: the first 64 bits of every feature in one array and the remaining
-// 192 in another, so that early termination reads 8 bytes per rejected candidate.
+// words (3 for ORB, 7 for BRISK) in another, so that early termination reads 8 bytes per rejected
+// candidate. Every descriptor must have the database's width (DatabaseParams::descriptor_bytes).
 class KeyframeDatabase {
  public:
   explicit KeyframeDatabase(const DatabaseParams& params = {});
 
   const DatabaseParams& params() const { return params_; }
+  // The similarity parameters at this database's width (SimilarityParams::scaledTo).
+  const SimilarityParams& similarity() const { return similarity_; }
   // Similarity parameters do not shape the index, so they can change at any time (live tuning).
   // Throws InvalidInput, changing nothing, when they are invalid.
   void setSimilarityParams(const SimilarityParams& params);
 
-  // Adds a keyframe and returns its index. The cv::Mat overload throws InvalidInput (and adds
-  // nothing) unless the matrix is N x 32 CV_8U. A keyframe may have no features.
+  // Adds a keyframe and returns its index. Throws InvalidInput (and adds nothing) when a descriptor
+  // is not of the database's width (the cv::Mat overload: unless the matrix is N x width CV_8U). A
+  // keyframe may have no features.
   KeyframeIndex insert(const DescriptorList& descriptors);
   KeyframeIndex insert(const cv::Mat& descriptors);
   // Many keyframes at once, in order (loading a saved database): the same result as inserting them
-  // one by one, with a single merge of the index at the end.
+  // one by one, with a single merge of the index at the end. Checks every width before adding any.
   void insertAll(const std::vector<DescriptorList>& keyframes);
 
-  // Similarity of the query to every keyframe k < candidate_limit (all keyframes by default).
+  // Similarity of the query to every keyframe k < candidate_limit (all keyframes by default). Throws
+  // InvalidInput when the query's descriptors are not of the database's width.
   // Keyframes at or beyond the limit take no part: they neither receive votes nor count in N or N_f.
   // With a NearPastRule, the limit is lowered by the near-past band first (the similarity vector is
   // then shorter by near_past).
@@ -103,6 +111,7 @@ class KeyframeDatabase {
   QueryResult insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit = kAllKeyframes,
                              SearchMode mode = SearchMode::kIndex, const NearPastRule* near_past = nullptr);
 
+  int descriptorBytes() const { return params_.descriptor_bytes; }
   size_t size() const { return keyframe_offsets_.size() - 1; }
   size_t featureCount() const { return heads_.size(); }
   size_t featureCount(KeyframeIndex k) const { return keyframe_offsets_[k + 1] - keyframe_offsets_[k]; }
@@ -116,14 +125,23 @@ class KeyframeDatabase {
   void clear();
 
  private:
-  using Tail = std::array<uint64_t, kDescriptorWords - 1>;
+  struct IndexScratch;
+  using Vote = detail::DatabaseVote;
   int fullDistance(const Descriptor& q, FeatureId f) const;
+  // The query of one feature through the index: its votes (pairs within d0) into `votes` (empty),
+  // with the tails' word count known at compile time where it can be (kTailWords 0: read at run
+  // time), so that ORB's and BRISK's distances are unrolled loops.
+  template <int kTailWords>
+  void indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch, std::vector<Vote>& votes,
+                  QueryStats& stats) const;
 
   DatabaseParams params_;
+  SimilarityParams similarity_;
   PhiTable phi_;
   MihIndex index_;
+  int tail_words_ = 0;                       // words after the first, per feature
   std::vector<uint64_t> heads_;              // first 64 bits of every feature
-  std::vector<Tail> tails_;                  // remaining 192 bits
+  std::vector<uint64_t> tails_;              // the other words, tail_words_ per feature
   std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
 };
 

@@ -47,8 +47,12 @@ ros::Time stampOf(double seconds);
 std::vector<cv::KeyPoint> keypointsFromMsg(const std::vector<mild_lcd::KeyPoint>& msg);
 std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& keypoints);
 
-// Keypoints and descriptors of a Keyframe message (32 bytes of descriptor per keypoint), with its
-// optional intrinsics and depths.
+// A message's descriptor_bytes field as a width: 0 is 32 (ORB); over 64 throws InvalidInput.
+int descriptorBytesOf(uint32_t field);
+
+// Keypoints and descriptors of a Keyframe message (descriptor_bytes of descriptor per keypoint),
+// with its optional intrinsics and depths. Throws InvalidInput when the sizes do not fit; whether
+// the width is the database's is for the detector to judge.
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 
 // fx, fy, cx, cy from a CameraInfo's K; unknown when K is all zero. Throws InvalidInput for a K

@@ -12,7 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "mild_lcd/detector/loop_detector.hpp"
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/features.hpp"
 
 namespace mild_lcd {
 

@@ -39,10 +39,11 @@ struct NodeSettings {
 struct SettingDoc {
   std::string name;
   std::string default_value;
+  std::string range;
   std::string doc;
 };
 const std::vector<SettingDoc>& nodeSettingDocs();
-// The same as a Markdown table (name, default, meaning): the README's, printed by
+// The same as a Markdown table (name, default, range, meaning): the README's, printed by
 // `mild_lcd_node --help-parameters`.
 std::string nodeSettingsMarkdown();
 

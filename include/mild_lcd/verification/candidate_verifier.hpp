@@ -2,8 +2,8 @@
 
 #include <vector>
 
-#include "mild_lcd/features/feature_extractor.hpp"
 #include "mild_lcd/features/feature_match.hpp"
+#include "mild_lcd/features/features.hpp"
 #include "mild_lcd/verification/relative_pose.hpp"
 
 namespace mild {

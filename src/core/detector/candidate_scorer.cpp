@@ -8,21 +8,6 @@
 
 namespace mild {
 
-void ScoringParams::validate() const {
-  if (weights.size() != static_cast<size_t>(CandidateScorer::kFeatures)) {
-    throw InvalidInput("scoring/weights must list " + std::to_string(CandidateScorer::kFeatures) +
-                       " numbers (filter log-odds, ln inliers, inlier ratio, coverage, homography share), got " +
-                       std::to_string(weights.size()));
-  }
-  for (double w : weights) {
-    if (!std::isfinite(w)) throw InvalidInput("scoring/weights must be finite numbers");
-  }
-  if (!std::isfinite(bias)) throw InvalidInput("scoring/bias must be a finite number");
-  if (!(decision_probability > 0.0 && decision_probability <= 1.0)) {
-    throw InvalidInput("scoring/decision_probability must be in (0, 1], got " + std::to_string(decision_probability));
-  }
-}
-
 CandidateScorer::CandidateScorer(const ScoringParams& params) : params_((params.validate(), params)) {}
 
 std::vector<double> CandidateScorer::features(double filter_probability, const Verification& v) {

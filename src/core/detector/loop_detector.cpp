@@ -19,36 +19,38 @@ double msSince(Clock::time_point start) {
 
 }  // namespace
 
-void CandidateParams::validate() const {
-  if (exclusion_frames < 0)
-    throw InvalidInput("detector/exclusion_frames must be >= 0, got " + std::to_string(exclusion_frames));
-  if (!(exclusion_seconds >= 0.0)) throw InvalidInput("detector/exclusion_seconds must be >= 0");
-  if (max_candidates < 1)
-    throw InvalidInput("detector/max_candidates must be >= 1, got " + std::to_string(max_candidates));
-  if (suppression_radius < 0) throw InvalidInput("detector/suppression_radius must be >= 0");
-  if (!(near_past_kappa >= 0.0) || !std::isfinite(near_past_kappa)) {
-    throw InvalidInput("detector/near_past_kappa must be >= 0, got " + std::to_string(near_past_kappa));
-  }
-  if (near_past_tolerance < 0) throw InvalidInput("detector/near_past_tolerance must be >= 0");
-  if (near_past_min_background < 1) throw InvalidInput("detector/near_past_min_background must be >= 1");
-  if (!(min_probability >= 0.0 && min_probability <= 1.0)) {
-    throw InvalidInput("detector/min_probability must be in [0, 1], got " + std::to_string(min_probability));
-  }
+DatabaseParams DetectorParams::databaseParams() const {
+  DatabaseParams p = database;
+  p.descriptor_bytes = features.descriptorBytes();
+  return p;
 }
 
 void DetectorParams::validate() const {
-  orb.validate();
-  database.validate();
+  features.validate();
+  const DatabaseParams db = databaseParams();
+  db.validate();
+  // The layouts the width implies: substrings of at most 64 bits (index), 20 (sparse match).
+  const int bits = db.descriptor_bytes * 8;
+  const int fewest = std::max(SubstringLayout::kMinSubstrings,
+                              SubstringLayout::substringsFor(bits, SubstringLayout::kMaxSubstringBits));
+  if (db.index.tablesFor(bits) < fewest) {
+    throw InvalidInput("index/num_tables must be 0 (automatic) or at least " + std::to_string(fewest) + " for " +
+                       std::to_string(bits) + "-bit descriptors (substrings of at most 64 bits), got " +
+                       std::to_string(db.index.num_tables));
+  }
   filter.validate();
   candidates.validate();
-  if (verification.enabled) verification.validate();
+  if (verification.enabled) {
+    verification.validate();
+    verification.matching.validateFor(bits);
+  }
   scoring.validate();
 }
 
 LoopDetector::LoopDetector(const DetectorParams& params)
     : params_((params.validate(), params)),
-      extractor_(params.orb),
-      database_(params.database),
+      extractor_(makeFeatureExtractor(params.features)),
+      database_(params.databaseParams()),
       filter_(makeTemporalFilter(params.filter)),
       scorer_(params.scoring) {
   if (params_.verification.enabled) verifier_ = std::make_unique<GeometricVerifier>(params_.verification);
@@ -120,7 +122,16 @@ PreparedRestore LoopDetector::prepareRestore(DetectorState state, bool continue_
   return build(std::move(state), static_cast<KeyframeIndex>(n), next_session, false);
 }
 
+void LoopDetector::checkWidth(const DetectorState& state) const {
+  if (state.descriptor_bytes != descriptorBytes()) {
+    throw InvalidInput("the map holds " + std::to_string(state.descriptor_bytes) + "-byte descriptors, this detector " +
+                       std::to_string(descriptorBytes()) + "-byte ones (features/type " + params_.features.type +
+                       "): a map is only loaded by a detector with the same descriptor");
+  }
+}
+
 PreparedRestore LoopDetector::prepareMerge(DetectorState state) const {
+  checkWidth(state);
   const size_t added = state.records.size();
   for (const KeyframeRecord& r : state.records) {
     if (index_of_id_.count(r.id)) {
@@ -185,7 +196,8 @@ PreparedRestore LoopDetector::build(DetectorState state, KeyframeIndex session_s
   }
   if (n > 0 && state.next_id <= largest_id) throw InvalidInput("state's next id is not above its largest keyframe id");
 
-  KeyframeDatabase database(params_.database);
+  checkWidth(state);
+  KeyframeDatabase database(params_.databaseParams());
   database.insertAll(state.descriptors);
   std::unique_ptr<TemporalFilter> filter = makeTemporalFilter(params_.filter);
   if (load_filter) {
@@ -265,8 +277,14 @@ void LoopDetector::checkId(std::optional<uint64_t> id) const {
 DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp,
                                       std::optional<uint64_t> id, const CameraIntrinsics& camera) {
   checkId(id);
+  if (extractor_->descriptorBytes() != descriptorBytes()) {
+    throw InvalidInput("this detector holds " + std::to_string(descriptorBytes()) +
+                       "-byte descriptors (features/descriptor_bytes) but features/type " + extractor_->name() +
+                       " extracts " + std::to_string(extractor_->descriptorBytes()) +
+                       "-byte ones: give it Keyframes with its descriptors, not images");
+  }
   const auto start = Clock::now();
-  Features features = extractor_.extract(image, format);
+  Features features = extractor_->extract(image, format);
   features.camera = camera;
   const double extract_ms = msSince(start);
   DetectionResult result = process(std::move(features), stamp, id);
@@ -280,6 +298,13 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
                        std::to_string(features.descriptors.size()) + " descriptors");
   }
   checkCameraAndDepths(features);
+  for (const Descriptor& d : features.descriptors) {
+    if (d.bytes != descriptorBytes()) {
+      throw InvalidInput("keyframe descriptors are " + std::to_string(d.bytes) + " bytes wide; this database holds " +
+                         std::to_string(descriptorBytes()) + "-byte descriptors (features/type " +
+                         params_.features.type + ")");
+    }
+  }
   checkId(id);
   if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
   DetectionResult result;

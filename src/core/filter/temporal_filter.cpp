@@ -16,31 +16,10 @@ const std::vector<std::string>& temporalFilterTypes() {
 }
 
 void FilterParams::validate() const {
-  const auto& types = temporalFilterTypes();
-  if (std::find(types.begin(), types.end(), type) == types.end()) {
-    throw InvalidInput("filter/type must be 'exclusive_hypotheses' or 'independent_binary', got '" + type + "'");
-  }
-  auto probability = [](double v, const char* name) {
-    if (!(v >= 0.0 && v <= 1.0))
-      throw InvalidInput(std::string(name) + " must be a probability in [0, 1], got " + std::to_string(v));
-  };
-  probability(loop_persistence, "filter/loop_persistence");
-  probability(loop_onset, "filter/loop_onset");
-  if (motion_kernel.empty() || motion_kernel.size() > 64) {
-    throw InvalidInput("filter/motion_kernel must list 1 to 64 weights (advancing 0, 1, 2, ... keyframes)");
-  }
+  validateDeclared(*this);
   double total = 0.0;
-  for (double w : motion_kernel) {
-    if (!(w >= 0.0) || !std::isfinite(w)) throw InvalidInput("filter/motion_kernel weights must be >= 0");
-    total += w;
-  }
+  for (double w : motion_kernel) total += w;
   if (!(total > 0.0)) throw InvalidInput("filter/motion_kernel needs at least one positive weight");
-  if (!(no_loop_likelihood > 0.0) || !std::isfinite(no_loop_likelihood)) {
-    throw InvalidInput("filter/no_loop_likelihood must be a positive number, got " +
-                       std::to_string(no_loop_likelihood));
-  }
-  if (candidate_window < 0)
-    throw InvalidInput("filter/candidate_window must be >= 0, got " + std::to_string(candidate_window));
 }
 
 std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params) {

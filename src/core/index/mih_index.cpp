@@ -9,34 +9,11 @@
 namespace mild {
 namespace {
 
-constexpr int kMaxRadius = 3;
 // Substrings up to this many bits get a directly addressed table (2^20 buckets at most);
 // longer ones a hash map.
 constexpr int kMaxDenseBits = 20;
 
-void addMasks(int length, int radius, int first_bit, uint64_t mask, std::vector<uint64_t>& out) {
-  out.push_back(mask);
-  if (radius == 0) return;
-  for (int b = first_bit; b < length; ++b) addMasks(length, radius - 1, b + 1, mask | (uint64_t{1} << b), out);
-}
-
 }  // namespace
-
-void MihParams::validate() const {
-  if (num_tables < SubstringLayout::kMinSubstrings || num_tables > SubstringLayout::kMaxSubstrings) {
-    throw InvalidInput("index/num_tables must be in [" + std::to_string(SubstringLayout::kMinSubstrings) + ", " +
-                       std::to_string(SubstringLayout::kMaxSubstrings) + "], got " + std::to_string(num_tables));
-  }
-  if (radius < 0 || radius > kMaxRadius) {
-    throw InvalidInput("index/radius must be in [0, " + std::to_string(kMaxRadius) + "], got " +
-                       std::to_string(radius));
-  }
-  if (!(bucket_cap_factor > 0.0) || !std::isfinite(bucket_cap_factor)) {
-    throw InvalidInput("index/bucket_cap_factor must be a positive number, got " + std::to_string(bucket_cap_factor));
-  }
-  if (min_bucket_cap < 1) throw InvalidInput("index/min_bucket_cap must be at least 1");
-  if (max_bucket_entries == 1) throw InvalidInput("index/max_bucket_entries must be 0 (off) or at least 2");
-}
 
 size_t MihIndex::mergeThreshold(const Table& table) {
   // Recent entries cost a dependent load each at query time; 1/64 of the settled ones keeps them
@@ -57,12 +34,9 @@ uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
   return it->second;
 }
 
-MihIndex::MihIndex(const MihParams& params) : params_(params), layout_((params.validate(), params.num_tables)) {
-  probe_masks_.resize(layout_.maxLength() + 1);
-  for (int t = 0; t < layout_.count(); ++t) {
-    const int len = layout_.length(t);
-    if (probe_masks_[len].empty()) addMasks(len, std::min(params_.radius, len), 0, 0, probe_masks_[len]);
-  }
+MihIndex::MihIndex(const MihParams& params, int bits)
+    : params_(params), layout_((params.validate(), params.tablesFor(bits)), bits) {
+  probe_masks_ = layout_.probeMasks(params_.radius);
   clear();
 }
 

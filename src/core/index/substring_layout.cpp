@@ -1,22 +1,36 @@
 #include "mild_lcd/index/substring_layout.hpp"
 
+#include <algorithm>
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
 
 namespace mild {
+namespace {
 
-SubstringLayout::SubstringLayout(int num_substrings) {
-  if (num_substrings < kMinSubstrings || num_substrings > kMaxSubstrings) {
-    throw InvalidInput("number of hash tables (substrings) must be in [" + std::to_string(kMinSubstrings) + ", " +
+void addMasks(int length, int radius, int first_bit, uint64_t mask, std::vector<uint64_t>& out) {
+  out.push_back(mask);
+  if (radius == 0) return;
+  for (int b = first_bit; b < length; ++b) addMasks(length, radius - 1, b + 1, mask | (uint64_t{1} << b), out);
+}
+
+}  // namespace
+
+SubstringLayout::SubstringLayout(int num_substrings, int bits) : bits_(bits) {
+  if (bits % 8 != 0) throw InvalidInput("descriptor width must be whole bytes, got " + std::to_string(bits) + " bits");
+  checkDescriptorBytes(bits / 8);
+  const int fewest = std::max(kMinSubstrings, substringsFor(bits, kMaxSubstringBits));
+  if (num_substrings < fewest || num_substrings > kMaxSubstrings) {
+    throw InvalidInput("number of hash tables (substrings) for " + std::to_string(bits) +
+                       "-bit descriptors must be in [" + std::to_string(fewest) + ", " +
                        std::to_string(kMaxSubstrings) + "], got " + std::to_string(num_substrings));
   }
-  const int base = kDescriptorBits / num_substrings;
-  const int longer = kDescriptorBits % num_substrings;
+  const int base = bits / num_substrings;
+  const int longer = bits % num_substrings;
   int offset = 0;
   for (int t = 0; t < num_substrings; ++t) {
     const int len = base + (t < longer ? 1 : 0);
-    Descriptor m;
+    Descriptor m(bits / 8);
     for (int b = offset; b < offset + len; ++b) m.flip(b);
     offsets_.push_back(offset);
     lengths_.push_back(len);
@@ -29,6 +43,14 @@ SubstringLayout::SubstringLayout(int num_substrings) {
     extract_.push_back(e);
     offset += len;
   }
+}
+
+std::vector<std::vector<uint64_t>> SubstringLayout::probeMasks(int radius) const {
+  std::vector<std::vector<uint64_t>> masks(static_cast<size_t>(maxLength()) + 1);
+  for (int len : lengths_) {
+    if (masks[len].empty()) addMasks(len, std::min(radius, len), 0, 0, masks[len]);
+  }
+  return masks;
 }
 
 }  // namespace mild

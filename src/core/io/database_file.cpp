@@ -93,7 +93,8 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
   for (const auto& [name, value] : describeParameters(detector.params())) parameters += name + ": " + value + "\n";
   w.put(static_cast<uint32_t>(parameters.size()));
   w.putBytes(parameters.data(), parameters.size());
-  w.put(static_cast<uint32_t>(kDescriptorBits));
+  const int bytes = detector.descriptorBytes();
+  w.put(static_cast<uint32_t>(bytes * 8));
   w.put(detector.nextId());
   w.put(static_cast<uint32_t>(detector.sessionStart()));
   w.put(static_cast<uint32_t>(detector.size()));
@@ -115,8 +116,8 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
       w.put(p.response);
       w.put(static_cast<int32_t>(p.octave));
     }
-    const DescriptorList descriptors = detector.database().descriptors(k);
-    w.putBytes(descriptors.data(), descriptors.size() * sizeof(Descriptor));
+    for (const Descriptor& d : detector.database().descriptors(k))
+      w.putBytes(d.words.data(), static_cast<size_t>(bytes));
   }
   const std::string filter = detector.filter().name();
   w.put(static_cast<uint32_t>(filter.size()));
@@ -334,13 +335,15 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
   const size_t text = in.count(1, "the parameters");
   const uint8_t* chars = in.take(text, "the parameters");
   state.parameters.assign(reinterpret_cast<const char*>(chars), text);
-  if (version >= 2) {
+  if (version >= 2) {  // version 1 held ORB's 256 bits only
     const uint32_t bits = in.get<uint32_t>("the descriptor width");
-    if (bits != static_cast<uint32_t>(kDescriptorBits)) {
-      throw InvalidInput(origin + ": holds " + std::to_string(bits) + "-bit descriptors; this database holds " +
-                         std::to_string(kDescriptorBits) + "-bit ones");
+    if (bits % 8 != 0 || bits / 8 < static_cast<uint32_t>(kMinDescriptorBytes) ||
+        bits / 8 > static_cast<uint32_t>(kMaxDescriptorBytes)) {
+      throw InvalidInput(origin + ": corrupt: descriptors of " + std::to_string(bits) + " bits");
     }
+    state.descriptor_bytes = static_cast<int>(bits / 8);
   }
+  const size_t descriptor_bytes = static_cast<size_t>(state.descriptor_bytes);
   state.next_id = in.get<uint64_t>("the next id");
   state.session_start = in.get<uint32_t>("the session start");
   const size_t record_bytes = 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0);
@@ -361,7 +364,7 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
         throw InvalidInput(origin + ": corrupt: keyframe " + std::to_string(r.id) + " has malformed camera intrinsics");
       }
     }
-    const size_t features = in.count(kKeypointBytes + kDescriptorBytes, "a keyframe's feature count");
+    const size_t features = in.count(kKeypointBytes + descriptor_bytes, "a keyframe's feature count");
     r.keypoints.resize(features);
     for (cv::KeyPoint& p : r.keypoints) {
       p.pt.x = in.get<float>("a keypoint");
@@ -371,9 +374,8 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
       p.response = in.get<float>("a keypoint");
       p.octave = in.get<int32_t>("a keypoint");
     }
-    state.descriptors[k].resize(features);
-    const uint8_t* descriptors = in.take(features * kDescriptorBytes, "descriptors");
-    if (features > 0) std::memcpy(state.descriptors[k].data(), descriptors, features * kDescriptorBytes);
+    const uint8_t* descriptors = in.take(features * descriptor_bytes, "descriptors");
+    state.descriptors[k] = descriptorsFromBytes(descriptors, features * descriptor_bytes, state.descriptor_bytes);
   }
   if (version == 1) {
     // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, which is
@@ -470,8 +472,7 @@ PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file,
   // Only the index parameters are read: the others may be retuned meanwhile (LoopDetector::retune).
   DetectorParams index_only;
   index_only.database.index = detector.params().database.index;
-  for (const auto& [name, value] : describeParameters(index_only)) {
-    if (name.compare(0, 6, "index/") != 0) continue;
+  for (const auto& [name, value] : describeParameters(index_only, MihParams::kSection)) {
     auto it = saved.find(name);
     if (it != saved.end() && it->second != value) {
       differing += (differing.empty() ? "" : ", ") + name + " " + it->second + " -> " + value;

@@ -44,16 +44,35 @@ bool inNamespaces(const std::string& name) {
 
 }  // namespace
 
+const std::vector<ParameterSection>& parameterSections() {
+  static const std::vector<ParameterSection> sections = {
+      {"features", "Where a keyframe's features come from when the node is given images."},
+      {"orb", "ORB (OpenCV), features/type orb: 256-bit descriptors."},
+      {"brisk", "BRISK (OpenCV), features/type brisk: 512-bit descriptors, as OKVIS and maplab use."},
+      {"akaze", "AKAZE with its M-LDB descriptor (OpenCV), features/type akaze: 486 bits in 61 bytes."},
+      {"index", "Multi-index hashing of the stored descriptors (seed paper III.B)."},
+      {"similarity", "Image similarity by voting (seed paper III.A, III.C-E). Distances are given per 256 bits."},
+      {"filter", "The temporal filter that turns similarity into a loop probability."},
+      {"detector", "Which stored keyframes may be candidates, and how many are reported."},
+      {"verification", "Geometric verification: sparse match of query and candidate, then a two-view model."},
+      {"scoring", "The calibrated loop probability every candidate is published with."},
+  };
+  return sections;
+}
+
 const std::vector<std::string>& detectorParameterNamespaces() {
-  static const std::vector<std::string> namespaces = {"orb",      "index",        "similarity", "filter",
-                                                      "detector", "verification", "scoring"};
+  static const std::vector<std::string> namespaces = [] {
+    std::vector<std::string> out;
+    for (const ParameterSection& s : parameterSections()) out.push_back(s.name);
+    return out;
+  }();
   return namespaces;
 }
 
 DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorParams& defaults) {
   DetectorParams p = defaults;
   std::vector<std::string> known;
-  visitParameters(p, [&](const std::string& name, auto& field) {
+  visitParameters(p, [&](const std::string& name, auto& field, const Bounds&, const char*) {
     using T = std::decay_t<decltype(field)>;
     known.push_back(name);
     if constexpr (std::is_same_v<T, bool>) {
@@ -99,20 +118,107 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
 }
 
 const std::vector<std::string>& runtimeParameterNames() {
-  static const std::vector<std::string> names = {
-      "detector/exclusion_frames",   "detector/exclusion_seconds",    "detector/max_candidates",
-      "detector/suppression_radius", "detector/min_probability",      "scoring/decision_probability",
-      "verification/min_inliers",    "verification/ransac_threshold", "verification/ratio",
-      "verification/pnp_threshold",
-  };
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> out;
+    const DetectorParams defaults;
+    visitParameters(defaults, [&](const std::string& name, const auto&, const Bounds& bounds, const char*) {
+      if (bounds.isRuntime()) out.push_back(name);
+    });
+    return out;
+  }();
   return names;
 }
 
-std::vector<std::pair<std::string, std::string>> describeParameters(const DetectorParams& params) {
-  DetectorParams p = params;
+std::vector<std::pair<std::string, std::string>> describeParameters(const DetectorParams& p,
+                                                                    const std::string& section) {
   std::vector<std::pair<std::string, std::string>> out;
-  visitParameters(p, [&](const std::string& name, auto& field) { out.emplace_back(name, toText(field)); });
+  const std::string prefix = section + "/";
+  visitParameters(p, [&](const std::string& name, const auto& field, const Bounds&, const char*) {
+    if (section.empty() || name.compare(0, prefix.size(), prefix) == 0) out.emplace_back(name, toText(field));
+  });
   return out;
+}
+
+namespace {
+
+// Words of `text` in lines of at most `width` characters, each starting with `indent`.
+std::string wrapped(const std::string& text, const std::string& indent, size_t width = 100) {
+  std::istringstream words(text);
+  std::string word, line, out;
+  while (words >> word) {
+    if (!line.empty() && indent.size() + line.size() + 1 + word.size() > width) {
+      out += indent + line + "\n";
+      line.clear();
+    }
+    line += (line.empty() ? "" : " ") + word;
+  }
+  if (!line.empty()) out += indent + line + "\n";
+  return out;
+}
+
+template <class T>
+std::string yamlValue(const T& v) {
+  if constexpr (std::is_same_v<T, double>) {
+    std::string text = toText(v);
+    // A whole number stays a YAML float, so that the file reads back as the type it documents.
+    if (text.find_first_of(".e") == std::string::npos && text.find("inf") == std::string::npos) text += ".0";
+    return text;
+  } else {
+    return toText(v);
+  }
+}
+
+}  // namespace
+
+std::string parameterYaml(const DetectorParams& params) {
+  std::ostringstream out;
+  out << "# mild_lcd detector parameters. Generated from their declarations in the code (with the defaults:\n"
+         "# config/default.yaml, which a test keeps equal to `mild_offline --print-config`): edit the code.\n"
+         "# The same names work in three places:\n"
+         "#   mild_offline --config FILE.yaml       (this layout)\n"
+         "#   the nodelet's private namespace       (<rosparam file=\"...\" command=\"load\"/>, e.g. "
+         "~orb/num_features)\n"
+         "#   your own YAML, listing only what you change.\n"
+         "# Unknown names in these sections, wrong types and values out of range stop the node at start-up\n"
+         "# with a message naming the parameter. [runtime] marks what dynamic_reconfigure may change while\n"
+         "# the node runs; everything else is read at start-up only. Figures quoted were measured on\n"
+         "# ../shared/bench; the filter, near-past and scoring values were chosen by leave-one-kind-out\n"
+         "# cross-validation (README.md \"Accuracy\"), one configuration for every scene.\n";
+  std::string section;
+  visitParameters(params, [&](const std::string& name, const auto& field, const Bounds& bounds, const char* doc) {
+    const size_t slash = name.find('/');
+    const std::string here = name.substr(0, slash);
+    if (here != section) {
+      section = here;
+      out << "\n" << section << ":\n";
+      for (const ParameterSection& s : parameterSections()) {
+        if (s.name == section) out << wrapped(s.doc, "  ## ");
+      }
+    }
+    out << wrapped(doc, "  # ");
+    const std::string range = bounds.text();
+    if (!range.empty() || bounds.isRuntime()) {
+      out << "  #" << (range.empty() ? "" : " Range: " + range + ".") << (bounds.isRuntime() ? " [runtime]" : "")
+          << "\n";
+    }
+    out << "  " << name.substr(slash + 1) << ": " << yamlValue(field) << "\n";
+  });
+  return out.str();
+}
+
+std::string parameterMarkdown() {
+  std::ostringstream out;
+  out << "| parameter | default | range | live | meaning |\n|---|---|---|---|---|\n";
+  const DetectorParams defaults;
+  visitParameters(defaults, [&](const std::string& name, const auto& field, const Bounds& bounds, const char* doc) {
+    std::string meaning = doc;
+    for (char& c : meaning) {
+      if (c == '|') c = '/';
+    }
+    out << "| `" << name << "` | `" << yamlValue(field) << "` | " << bounds.text() << " | "
+        << (bounds.isRuntime() ? "yes" : "") << " | " << meaning << " |\n";
+  });
+  return out.str();
 }
 
 // --- YAML ------------------------------------------------------------------------------------

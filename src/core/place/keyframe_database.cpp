@@ -7,13 +7,26 @@
 #include "mild_lcd/common/errors.hpp"
 
 namespace mild {
-namespace {
 
-struct Vote {
+struct detail::DatabaseVote {
   FeatureId feature;
   KeyframeIndex keyframe;
   double phi;
 };
+
+// Buffers of one query, reused from feature to feature.
+struct KeyframeDatabase::IndexScratch {
+  struct Survivor {
+    FeatureId id;
+    int partial;
+  };
+  std::vector<FeatureId> candidates;
+  std::vector<Survivor> survivors;
+};
+
+namespace {
+
+using Vote = detail::DatabaseVote;
 
 // A stored feature that meets the query feature in several tables is still one candidate.
 // Only votes (pairs within d0) need this, and they are few, so sorting beats a visited-mark
@@ -76,15 +89,26 @@ QueryStats& QueryStats::operator+=(const QueryStats& o) {
   return *this;
 }
 
+void DatabaseParams::validate() const {
+  checkDescriptorBytes(descriptor_bytes);
+  index.validate();
+  similarity.validate();
+}
+
 KeyframeDatabase::KeyframeDatabase(const DatabaseParams& params)
-    : params_((params.validate(), params)), phi_(params.similarity), index_(params.index) {
+    : params_((params.validate(), params)),
+      similarity_(params.similarity.scaledTo(params.descriptor_bytes * 8)),
+      phi_(similarity_),
+      index_(params.index, params.descriptor_bytes * 8),
+      tail_words_(descriptorWords(params.descriptor_bytes) - 1) {
   keyframe_offsets_.push_back(0);
 }
 
 void KeyframeDatabase::setSimilarityParams(const SimilarityParams& params) {
   params.validate();
   params_.similarity = params;
-  phi_ = PhiTable(params);
+  similarity_ = params.scaledTo(params_.descriptor_bytes * 8);
+  phi_ = PhiTable(similarity_);
 }
 
 void KeyframeDatabase::clear() {
@@ -94,9 +118,12 @@ void KeyframeDatabase::clear() {
   keyframe_offsets_.assign(1, 0);
 }
 
-KeyframeIndex KeyframeDatabase::insert(const cv::Mat& descriptors) { return insert(descriptorsFromMat(descriptors)); }
+KeyframeIndex KeyframeDatabase::insert(const cv::Mat& descriptors) {
+  return insert(descriptorsFromMat(descriptors, params_.descriptor_bytes));
+}
 
 KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
+  checkDescriptorWidth(descriptors, params_.descriptor_bytes, "keyframe");
   const uint64_t total = static_cast<uint64_t>(featureCount()) + descriptors.size();
   if (total >= std::numeric_limits<FeatureId>::max() || size() + 1 >= kAllKeyframes) {
     throw InvalidInput("keyframe database is full (2^32 features or keyframes)");
@@ -108,11 +135,11 @@ KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
     // leave up to half of it unused (an extra 16 bytes per feature on average).
     const size_t grown = std::max<size_t>(total, heads_.capacity() + heads_.capacity() / 4 + 1024);
     heads_.reserve(grown);
-    tails_.reserve(grown);
+    tails_.reserve(grown * static_cast<size_t>(tail_words_));
   }
   for (const Descriptor& d : descriptors) {
     heads_.push_back(d.words[0]);
-    tails_.push_back({d.words[1], d.words[2], d.words[3]});
+    tails_.insert(tails_.end(), d.words.begin() + 1, d.words.begin() + 1 + tail_words_);
   }
   index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
   keyframe_offsets_.push_back(static_cast<FeatureId>(total));
@@ -126,16 +153,18 @@ KeyframeIndex KeyframeDatabase::keyframeOf(FeatureId f) const {
 }
 
 int KeyframeDatabase::fullDistance(const Descriptor& q, FeatureId f) const {
-  const Tail& tail = tails_[f];
-  return popcount64(q.words[0] ^ heads_[f]) + popcount64(q.words[1] ^ tail[0]) + popcount64(q.words[2] ^ tail[1]) +
-         popcount64(q.words[3] ^ tail[2]);
+  return popcount64(q.words[0] ^ heads_[f]) +
+         hammingWords(q.words.data() + 1, tails_.data() + static_cast<size_t>(f) * tail_words_, tail_words_);
 }
 
 void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
   size_t total = featureCount();
-  for (const auto& k : keyframes) total += k.size();
+  for (const auto& k : keyframes) {
+    checkDescriptorWidth(k, params_.descriptor_bytes, "keyframe");
+    total += k.size();
+  }
   heads_.reserve(total);
-  tails_.reserve(total);
+  tails_.reserve(total * static_cast<size_t>(tail_words_));
   keyframe_offsets_.reserve(keyframe_offsets_.size() + keyframes.size());
   index_.deferMerges(true);
   try {
@@ -148,9 +177,10 @@ void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
 }
 
 Descriptor KeyframeDatabase::descriptor(FeatureId f) const {
-  Descriptor d;
+  Descriptor d(params_.descriptor_bytes);
   d.words[0] = heads_[f];
-  for (int w = 1; w < kDescriptorWords; ++w) d.words[w] = tails_[f][w - 1];
+  const uint64_t* tail = tails_.data() + static_cast<size_t>(f) * tail_words_;
+  std::copy(tail, tail + tail_words_, d.words.begin() + 1);
   return d;
 }
 
@@ -161,7 +191,7 @@ DescriptorList KeyframeDatabase::descriptors(KeyframeIndex k) const {
 }
 
 QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_limit, SearchMode mode) const {
-  return query(descriptorsFromMat(q), candidate_limit, mode, nullptr);
+  return query(descriptorsFromMat(q, params_.descriptor_bytes), candidate_limit, mode, nullptr);
 }
 
 namespace {
@@ -201,8 +231,62 @@ KeyframeIndex nearPastBand(const std::vector<uint32_t>& matched, KeyframeIndex l
 
 }  // namespace
 
+template <int kTailWords>
+void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch,
+                                  std::vector<Vote>& votes, QueryStats& stats) const {
+  const SimilarityParams& sp = similarity_;
+  const int d0 = sp.max_distance;
+  const int tp = sp.early_termination_threshold;
+  ProbeCounters counters;
+  auto& survivors = scratch.survivors;
+  survivors.clear();
+  size_t n_candidates = 0;
+  if (index_.params().inline_prefixes) {
+    // The first 64 bits sit beside each id in its bucket: one sequential pass, no random reads.
+    index_.probeWithPrefixes(f, id_limit, counters, [&](FeatureId id, uint64_t prefix) {
+      const int partial = popcount64(f.words[0] ^ prefix);
+      if (partial <= tp) survivors.push_back({id, partial});
+    });
+    n_candidates = counters.entries_visited;
+  } else {
+    auto& candidates = scratch.candidates;
+    candidates.clear();
+    index_.gather(f, id_limit, counters, candidates);
+    // Candidates are scattered over the whole database, so each check waits for memory. Two
+    // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
+    // requested while one is checked, then the rest of the survivors likewise.
+    constexpr size_t kAhead = 16;
+    n_candidates = candidates.size();
+    for (size_t c = 0; c < n_candidates; ++c) {
+      if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
+      const FeatureId id = candidates[c];
+      const int partial = popcount64(f.words[0] ^ heads_[id]);
+      if (partial > tp) continue;
+      survivors.push_back({id, partial});
+    }
+  }
+  stats.early_rejections += n_candidates - survivors.size();
+  stats.full_distances += survivors.size();
+  const size_t tail_words = kTailWords > 0 ? static_cast<size_t>(kTailWords) : static_cast<size_t>(tail_words_);
+  const uint64_t* tails = tails_.data();
+  const uint64_t* rest = f.words.data() + 1;
+  constexpr size_t kAhead = 16;
+  for (size_t c = 0; c < survivors.size(); ++c) {
+    if (c + kAhead < survivors.size()) __builtin_prefetch(tails + survivors[c + kAhead].id * tail_words);
+    const auto [id, partial] = survivors[c];
+    const uint64_t* tail = tails + id * tail_words;
+    const int d = partial + (kTailWords > 0 ? hammingWords<kTailWords>(rest, tail)
+                                            : hammingWords(rest, tail, static_cast<int>(tail_words)));
+    if (d <= d0) votes.push_back({id, 0, phi_(d)});
+  }
+  removeDuplicateVotes(votes);
+  stats.buckets_probed += counters.buckets_probed;
+  stats.candidates_visited += counters.entries_visited;
+}
+
 QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candidate_limit, SearchMode mode,
                                     const NearPastRule* near_past) const {
+  checkDescriptorWidth(q, params_.descriptor_bytes, "query");
   KeyframeIndex n = static_cast<KeyframeIndex>(std::min<size_t>(candidate_limit, size()));
   QueryResult result;
   QueryStats& stats = result.stats;
@@ -212,22 +296,16 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
     return result;
   }
 
-  const SimilarityParams& sp = params_.similarity;
+  const SimilarityParams& sp = similarity_;
   const FeatureId id_limit = keyframe_offsets_[n];
   const int d0 = sp.max_distance;
-  const int tp = sp.early_termination_threshold;
   // First every query feature's votes (pairs within d0), then the limit (the near past may lower
   // it), then the similarity from the votes below the limit.
   std::vector<Vote> votes;
   std::vector<size_t> vote_end;
   vote_end.reserve(q.size());
   std::vector<Vote> feature_votes;
-  std::vector<FeatureId> candidates;
-  struct Survivor {
-    FeatureId id;
-    int partial;
-  };
-  std::vector<Survivor> survivors;
+  IndexScratch scratch;
   for (const Descriptor& f : q) {
     feature_votes.clear();
     if (mode == SearchMode::kExact) {
@@ -236,47 +314,12 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
         const int d = fullDistance(f, id);
         if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
       }
+    } else if (tail_words_ == 3) {  // ORB, BRIEF: 256 bits
+      indexVotes<3>(f, id_limit, scratch, feature_votes, stats);
+    } else if (tail_words_ == 7) {  // BRISK, FREAK, AKAZE: up to 512 bits
+      indexVotes<7>(f, id_limit, scratch, feature_votes, stats);
     } else {
-      ProbeCounters counters;
-      survivors.clear();
-      size_t n_candidates = 0;
-      if (index_.params().inline_prefixes) {
-        // The first 64 bits sit beside each id in its bucket: one sequential pass, no random reads.
-        index_.probeWithPrefixes(f, id_limit, counters, [&](FeatureId id, uint64_t prefix) {
-          const int partial = popcount64(f.words[0] ^ prefix);
-          if (partial <= tp) survivors.push_back({id, partial});
-        });
-        n_candidates = counters.entries_visited;
-      } else {
-        candidates.clear();
-        index_.gather(f, id_limit, counters, candidates);
-        // Candidates are scattered over the whole database, so each check waits for memory. Two
-        // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
-        // requested while one is checked, then the rest of the survivors likewise.
-        constexpr size_t kAhead = 16;
-        n_candidates = candidates.size();
-        for (size_t c = 0; c < n_candidates; ++c) {
-          if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
-          const FeatureId id = candidates[c];
-          const int partial = popcount64(f.words[0] ^ heads_[id]);
-          if (partial > tp) continue;
-          survivors.push_back({id, partial});
-        }
-      }
-      stats.early_rejections += n_candidates - survivors.size();
-      stats.full_distances += survivors.size();
-      constexpr size_t kAhead = 16;
-      for (size_t c = 0; c < survivors.size(); ++c) {
-        if (c + kAhead < survivors.size()) __builtin_prefetch(&tails_[survivors[c + kAhead].id]);
-        const auto [id, partial] = survivors[c];
-        const Tail& tail = tails_[id];
-        const int d = partial + popcount64(f.words[1] ^ tail[0]) + popcount64(f.words[2] ^ tail[1]) +
-                      popcount64(f.words[3] ^ tail[2]);
-        if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
-      }
-      removeDuplicateVotes(feature_votes);
-      stats.buckets_probed += counters.buckets_probed;
-      stats.candidates_visited += counters.entries_visited;
+      indexVotes<0>(f, id_limit, scratch, feature_votes, stats);
     }
     // Only votes need their keyframe, and they are few: look it up rather than store it per feature.
     for (Vote& v : feature_votes) v.keyframe = keyframeOf(v.feature);
@@ -332,7 +375,7 @@ QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, 
 }
 
 size_t KeyframeDatabase::memoryBytes() const {
-  return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(Tail) +
+  return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(uint64_t) +
          keyframe_offsets_.capacity() * sizeof(FeatureId);
 }
 

@@ -12,26 +12,16 @@ namespace mild {
 namespace {
 
 // Fewest correspondences a fundamental (7/8-point) or essential (5-point) solver needs, with margin.
-constexpr int kMinimalMatches = 8;
+constexpr int kMinimalMatches = VerificationParams::kMinimalMatches;
 
 }  // namespace
 
 void VerificationParams::validate() const {
+  validateDeclared(*this);
   matching.validate();
-  if (!(ransac_threshold > 0.0) || !std::isfinite(ransac_threshold)) {
-    throw InvalidInput("verification/ransac_threshold must be a positive number of pixels");
-  }
-  if (!(confidence > 0.0 && confidence < 1.0)) throw InvalidInput("verification/confidence must be in (0, 1)");
-  if (max_iterations < 1) throw InvalidInput("verification/max_iterations must be >= 1");
-  if (min_inliers < kMinimalMatches) {
-    throw InvalidInput("verification/min_inliers must be >= " + std::to_string(kMinimalMatches));
-  }
   if (usesIntrinsics() &&
       !(fy > 0.0 && std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy))) {
     throw InvalidInput("verification/fx, fy must both be positive (and cx, cy finite) to use the essential matrix");
-  }
-  if (!(pnp_threshold > 0.0) || !std::isfinite(pnp_threshold)) {
-    throw InvalidInput("verification/pnp_threshold must be a positive number of pixels");
   }
 }
 

@@ -5,50 +5,38 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/place/similarity.hpp"
 
 namespace mild {
-namespace {
-
-constexpr int kMaxRadius = 2;
-constexpr int kMaxTableBits = 20;  // directly addressed tables only
-
-void addMasks(int length, int radius, int first_bit, uint64_t mask, std::vector<uint64_t>& out) {
-  out.push_back(mask);
-  if (radius == 0) return;
-  for (int b = first_bit; b < length; ++b) addMasks(length, radius - 1, b + 1, mask | (uint64_t{1} << b), out);
-}
-
-}  // namespace
-
 void SparseMatchParams::validate() const {
-  if (num_tables < SubstringLayout::kMinSubstrings || num_tables > SubstringLayout::kMaxSubstrings ||
-      (kDescriptorBits + num_tables - 1) / num_tables > kMaxTableBits) {
-    throw InvalidInput(
-        "sparse match num_tables (verification/num_tables) must be in [13, 64] (substrings of at most 20 bits), got " +
-        std::to_string(num_tables));
-  }
-  if (radius < 0 || radius > kMaxRadius) {
-    throw InvalidInput("sparse match radius (verification/radius) must be in [0, 2], got " + std::to_string(radius));
-  }
-  if (max_distance < 0 || max_distance > kDescriptorBits) {
-    throw InvalidInput("sparse match max_distance (verification/max_distance) must be in [0, 256], got " +
-                       std::to_string(max_distance));
-  }
-  if (!(ratio >= 0.0 && ratio <= 1.0))
-    throw InvalidInput("sparse match ratio (verification/ratio) must be in [0, 1] (0 = off)");
+  validateDeclared(*this);
   if (!(max_keypoint_distance >= 0.0) || !std::isfinite(max_keypoint_distance)) {
     throw InvalidInput("sparse match max_keypoint_distance must be >= 0 (0 = off)");
   }
 }
 
-SparseMatcher::SparseMatcher(const SparseMatchParams& params)
-    : params_((params.validate(), params)), layout_(params.num_tables) {
-  probe_masks_.resize(layout_.maxLength() + 1);
-  for (int t = 0; t < layout_.count(); ++t) {
-    const int len = layout_.length(t);
-    if (probe_masks_[len].empty()) addMasks(len, std::min(params_.radius, len), 0, 0, probe_masks_[len]);
+void SparseMatchParams::validateFor(int bits) const {
+  validate();
+  const int tables = tablesFor(bits);
+  const int fewest = SubstringLayout::substringsFor(bits, kMaxSubstringBits);
+  if (tables < fewest) {
+    throw InvalidInput("sparse match num_tables (verification/num_tables) must be 0 (automatic) or at least " +
+                       std::to_string(fewest) + " for " + std::to_string(bits) +
+                       "-bit descriptors (substrings of at most " + std::to_string(kMaxSubstringBits) + " bits), got " +
+                       std::to_string(tables));
   }
-  buckets_.resize(size_t{1} << layout_.maxLength());
+}
+
+SparseMatcher::SparseMatcher(const SparseMatchParams& params) : params_((params.validate(), params)) {}
+
+void SparseMatcher::prepareFor(int bits) {
+  if (layout_ && layout_->bits() == bits) return;
+  params_.validateFor(bits);
+  layout_.emplace(params_.tablesFor(bits), bits);
+  max_distance_ = scaleDistance(params_.max_distance, bits);
+  probe_masks_ = layout_->probeMasks(params_.radius);
+  buckets_.assign(size_t{1} << layout_->maxLength(), Bucket{});
+  generation_ = 0;
 }
 
 void SparseMatcher::searchAll(const DescriptorList& query, const DescriptorList& train,
@@ -63,24 +51,25 @@ void SparseMatcher::searchAll(const DescriptorList& query, const DescriptorList&
   int32_t* next = next_.data();
   uint64_t candidates = 0;
 
-  for (int t = 0; t < layout_.count(); ++t) {
+  const SubstringLayout& layout = *layout_;
+  for (int t = 0; t < layout.count(); ++t) {
     if (++generation_ == 0) {  // wrapped: an old stamp could look current, so clear once
       std::fill(buckets_.begin(), buckets_.end(), Bucket{});
       generation_ = 1;
     }
     // Hash the train descriptors; inserting in reverse keeps every chain in index order.
     for (size_t i = n; i-- > 0;) {
-      Bucket& b = buckets[layout_.key(train[i], t)];
+      Bucket& b = buckets[layout.key(train[i], t)];
       if (b.stamp != generation_) b = Bucket{generation_, -1};
       next[i] = b.head;
       b.head = static_cast<int32_t>(i);
     }
-    const std::vector<uint64_t>& masks = probe_masks_[layout_.length(t)];
+    const std::vector<uint64_t>& masks = probe_masks_[layout.length(t)];
     stats_.buckets_probed += query.size() * masks.size();
     for (size_t q = 0; q < query.size(); ++q) {
       const Descriptor& d = query[q];
       Nearest& near = out[q];
-      const uint64_t key = layout_.key(d, t);
+      const uint64_t key = layout.key(d, t);
       auto visit = [&](const Bucket& b) {
         if (b.stamp != generation_) return;
         for (int32_t i = b.head; i >= 0; i = next[i]) {
@@ -113,7 +102,7 @@ void SparseMatcher::searchAll(const DescriptorList& query, const DescriptorList&
 }
 
 std::vector<FeatureMatch> SparseMatcher::match(const cv::Mat& query, const cv::Mat& train) {
-  return match(descriptorsFromMat(query), descriptorsFromMat(train));
+  return match(descriptorsFromMat(query), descriptorsFromMat(train, query.empty() ? 0 : query.cols));
 }
 
 std::vector<FeatureMatch> SparseMatcher::match(const DescriptorList& query, const DescriptorList& train,
@@ -133,13 +122,17 @@ std::vector<FeatureMatch> SparseMatcher::match(const DescriptorList& query, cons
   stats_ = SparseMatchStats{};
   std::vector<FeatureMatch> matches;
   if (query.empty() || train.empty()) return matches;
+  const int bytes = query.front().bytes;
+  checkDescriptorWidth(query, bytes, "query");
+  checkDescriptorWidth(train, bytes, "train set");
+  prepareFor(bytes * 8);
 
   searchAll(query, train, query_keypoints, train_keypoints, forward_);
   if (params_.cross_check) searchAll(train, query, train_keypoints, query_keypoints, backward_);
 
   for (size_t q = 0; q < query.size(); ++q) {
     const Nearest& f = forward_[q];
-    if (f.best < 0 || f.best_distance > params_.max_distance) continue;
+    if (f.best < 0 || f.best_distance > max_distance_) continue;
     if (params_.ratio > 0.0 && !(f.best_distance < params_.ratio * f.second_distance)) continue;
     if (params_.cross_check && backward_[f.best].best != static_cast<int>(q)) continue;
     matches.push_back({static_cast<int>(q), f.best, f.best_distance});

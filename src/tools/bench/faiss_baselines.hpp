@@ -18,8 +18,9 @@ namespace mild::tools {
 // feature within max_distance bits of each query feature (a range search), on one thread.
 class FaissBaselines {
  public:
-  // tables substrings of 256 / tables bits each (16 -> 16-bit substrings, as mild_lcd's default).
-  explicit FaissBaselines(int tables);
+  // `tables` substrings of bits / tables bits each (16 of ORB's 256 bits -> 16-bit substrings, as
+  // mild_lcd's default). faiss takes whole bytes per code, so bits is 8 x the descriptor's bytes.
+  FaissBaselines(int bits, int tables);
   ~FaissBaselines();
   FaissBaselines(const FaissBaselines&) = delete;
   FaissBaselines& operator=(const FaissBaselines&) = delete;
@@ -34,6 +35,7 @@ class FaissBaselines {
 
  private:
   std::unique_ptr<faiss::IndexBinaryMultiHash> index_;
+  int bytes_;
 };
 
 }  // namespace mild::tools

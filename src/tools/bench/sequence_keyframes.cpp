@@ -7,11 +7,11 @@
 
 namespace mild::tools {
 
-SequenceKeyframes::SequenceKeyframes(const std::string& dir, const OrbExtractor& extractor, int queries) {
+SequenceKeyframes::SequenceKeyframes(const std::string& dir, const FeatureExtractor& extractor, int queries) {
   std::vector<DescriptorList> frames;
   for (const auto& path : openImageSequence(dir).frames) {
     const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (!image.empty()) frames.push_back(extractor.extract(image).descriptors);
+    if (!image.empty()) frames.push_back(extractor.extract(image, PixelFormat::kGray).descriptors);
   }
   if (queries < 1 || frames.size() < static_cast<size_t>(queries) + 1) {
     throw InvalidInput("--sequence " + dir + ": " + std::to_string(frames.size()) +

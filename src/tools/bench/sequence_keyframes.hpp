@@ -1,7 +1,7 @@
 #pragma once
 
 // A keyframe database made from a real walk (e.g. ../shared/bench/generator/gen.py scale --frames
-// 10000), for mild_bench_scale --sequence: the frames' own ORB features in walk order, so that the
+// 10000), for mild_bench_scale --sequence: the frames' own features in walk order, so that the
 // map's buckets fill the way a robot's do (revisits, long stretches of new places), not the way
 // replicated frames do. Query frames are spread evenly over the walk and held out of the stored
 // keyframes, so each has its stored neighbours but is not itself in the map.
@@ -18,7 +18,7 @@ class SequenceKeyframes {
  public:
   // Reads and extracts every frame of `dir` (a folder of frames or one with images/). Throws
   // InvalidInput when the folder holds fewer than queries + 1 readable frames.
-  SequenceKeyframes(const std::string& dir, const OrbExtractor& extractor, int queries);
+  SequenceKeyframes(const std::string& dir, const FeatureExtractor& extractor, int queries);
 
   // Stored keyframe k (0-based, walk order without the query frames); k < size().
   const DescriptorList& keyframe(size_t k) const { return stored_.at(k); }

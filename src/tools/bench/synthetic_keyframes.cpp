@@ -13,7 +13,9 @@ SyntheticKeyframes::SyntheticKeyframes(std::vector<DescriptorList> frames, size_
     if (!f.empty()) frames_.push_back(std::move(f));
   }
   if (frames_.empty()) throw InvalidInput("no real frame with features to build synthetic keyframes from");
-  if (min_flips < 0 || max_flips < min_flips || max_flips > kDescriptorBits) throw InvalidInput("bad flip range");
+  if (min_flips < 0 || max_flips < min_flips || max_flips > frames_.front().front().bits()) {
+    throw InvalidInput("bad flip range");
+  }
 }
 
 DescriptorList SyntheticKeyframes::replicate(const DescriptorList& main, const DescriptorList& filler,
@@ -22,7 +24,7 @@ DescriptorList SyntheticKeyframes::replicate(const DescriptorList& main, const D
   out.reserve(features_);
   for (size_t i = 0; out.size() < features_ && i < main.size(); ++i) out.push_back(main[i]);
   for (size_t i = 0; out.size() < features_; ++i) out.push_back(filler[i % filler.size()]);
-  std::uniform_int_distribution<int> flips(min_flips_, max_flips_), bit(0, kDescriptorBits - 1);
+  std::uniform_int_distribution<int> flips(min_flips_, max_flips_), bit(0, main.front().bits() - 1);
   for (Descriptor& d : out) {
     for (int f = flips(rng); f > 0; --f) d.flip(bit(rng));  // repeats cancel: d is at most max_flips away
   }

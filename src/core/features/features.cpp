@@ -1,4 +1,4 @@
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/features/features.hpp"
 
 #include <algorithm>
 #include <string>
@@ -24,9 +24,8 @@ int channelsOf(PixelFormat f) {
   return 0;
 }
 
-// OpenCV's ORB keeps every keypoint that ties with the weakest one it retains, so a tiled texture
-// (thousands of equal responses) yields many times num_features. Keep exactly the strongest
-// `limit`, ties broken by position so that the choice is deterministic.
+}  // namespace
+
 void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, size_t limit) {
   if (keypoints.size() <= limit) return;
   std::vector<int> order(keypoints.size());
@@ -40,7 +39,7 @@ void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, s
     return ka.pt.x < kb.pt.x;
   });
   order.resize(limit);
-  std::sort(order.begin(), order.end());  // keep OpenCV's order among the survivors
+  std::sort(order.begin(), order.end());  // keep the detector's order among the survivors
   std::vector<cv::KeyPoint> kept;
   cv::Mat rows(static_cast<int>(limit), descriptors.cols, descriptors.type());
   for (size_t i = 0; i < limit; ++i) {
@@ -51,22 +50,21 @@ void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, s
   descriptors = rows;
 }
 
-}  // namespace
-
-void OrbParams::validate() const {
-  if (num_features < 1) throw InvalidInput("orb/num_features must be >= 1, got " + std::to_string(num_features));
-  if (!(scale_factor > 1.0) || scale_factor > 4.0) {
-    throw InvalidInput("orb/scale_factor must be in (1, 4], got " + std::to_string(scale_factor));
+Features detectAndDescribe(cv::Feature2D& detector, const cv::Mat& gray, size_t limit, int min_side, int bytes,
+                           const char* name) {
+  Features out;
+  if (std::min(gray.cols, gray.rows) < min_side) return out;
+  cv::Mat descriptors;
+  try {
+    detector.detectAndCompute(gray, cv::noArray(), out.keypoints, descriptors);
+  } catch (const cv::Exception& e) {
+    throw InvalidInput(std::string(name) + " cannot process a " + std::to_string(gray.cols) + " x " +
+                       std::to_string(gray.rows) + " image with these " + name + "/ parameters: " + e.err);
   }
-  if (num_levels < 1 || num_levels > 32) {
-    throw InvalidInput("orb/num_levels must be in [1, 32], got " + std::to_string(num_levels));
-  }
-  if (fast_threshold < 1 || fast_threshold > 255) {
-    throw InvalidInput("orb/fast_threshold must be in [1, 255], got " + std::to_string(fast_threshold));
-  }
-  if (edge_threshold < 3 || edge_threshold > 255) {
-    throw InvalidInput("orb/edge_threshold must be in [3, 255], got " + std::to_string(edge_threshold));
-  }
+  if (out.keypoints.empty() || descriptors.rows != static_cast<int>(out.keypoints.size())) return Features{};
+  keepStrongest(out.keypoints, descriptors, limit);
+  out.descriptors = descriptorsFromMat(descriptors, bytes);
+  return out;
 }
 
 void checkCameraAndDepths(const Features& features) {
@@ -107,31 +105,6 @@ cv::Mat toGray(const cv::Mat& image, PixelFormat format) {
       break;
   }
   return gray;
-}
-
-OrbExtractor::OrbExtractor(const OrbParams& params) : params_((params.validate(), params)) {
-  orb_ = cv::ORB::create(params_.num_features, static_cast<float>(params_.scale_factor), params_.num_levels,
-                         params_.edge_threshold, 0, 2, cv::ORB::HARRIS_SCORE, params_.edge_threshold,
-                         params_.fast_threshold);
-}
-
-Features OrbExtractor::extract(const cv::Mat& image, PixelFormat format) const {
-  const cv::Mat gray = toGray(image, format);
-  Features out;
-  // ORB keeps no keypoint within edge_threshold of the border, so a thinner image has none; and
-  // OpenCV's pyramid fails on it (a level rounds to 0 pixels).
-  if (std::min(gray.cols, gray.rows) < 2 * params_.edge_threshold + 1) return out;
-  cv::Mat descriptors;
-  try {
-    orb_->detectAndCompute(gray, cv::noArray(), out.keypoints, descriptors);
-  } catch (const cv::Exception& e) {
-    throw InvalidInput("ORB cannot process a " + std::to_string(gray.cols) + " x " + std::to_string(gray.rows) +
-                       " image with these orb/ parameters: " + e.err);
-  }
-  if (descriptors.rows != static_cast<int>(out.keypoints.size())) return Features{};
-  keepStrongest(out.keypoints, descriptors, static_cast<size_t>(params_.num_features));
-  out.descriptors = descriptorsFromMat(descriptors);
-  return out;
 }
 
 }  // namespace mild

@@ -1,0 +1,48 @@
+#pragma once
+
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
+
+#include "mild_lcd/features/camera_intrinsics.hpp"
+#include "mild_lcd/features/descriptor.hpp"
+
+namespace mild {
+
+// Channel order of an 8-bit input image.
+enum class PixelFormat { kGray, kBgr, kRgb, kBgra, kRgba };
+
+// Keypoints and their binary descriptors, row i of one describing keypoint i of the other.
+// Optionally the camera's intrinsics, and each keypoint's depth (metres along the optical axis,
+// from a depth camera or the front-end's triangulation; 0 or not finite = unknown), which make the
+// relative pose of a loop metric (PnP) instead of up to scale.
+struct Features {
+  std::vector<cv::KeyPoint> keypoints;
+  DescriptorList descriptors;
+  CameraIntrinsics camera;
+  std::vector<float> depths;  // empty, or one per keypoint
+};
+
+// Throws InvalidInput, naming the problem, when the camera is malformed (CameraIntrinsics::wellFormed)
+// or there are depths but not one per keypoint.
+void checkCameraAndDepths(const Features& features);
+
+// Converts an 8-bit image of the given format to one grey channel. Throws InvalidInput for an empty
+// image, a depth other than 8 bits, or a channel count that does not match the format.
+cv::Mat toGray(const cv::Mat& image, PixelFormat format);
+
+// Detectors keep every keypoint that ties with the weakest one they retain (OpenCV's ORB), or have
+// no cap at all (BRISK, AKAZE), so a tiled texture yields many times the wanted count. Keeps exactly
+// the strongest `limit` keypoints and their descriptor rows, ties broken by octave and position so
+// that the choice is deterministic, in the detector's order.
+void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, size_t limit);
+
+// Runs an OpenCV detector-descriptor on a grey image and keeps the strongest `limit` features.
+// Images thinner than `min_side` pixels yield no features (detectors fail on them in their pyramid);
+// any OpenCV failure becomes InvalidInput naming `name` and the image size. Descriptors must come
+// out `bytes` wide.
+Features detectAndDescribe(cv::Feature2D& detector, const cv::Mat& gray, size_t limit, int min_side, int bytes,
+                           const char* name);
+
+}  // namespace mild

@@ -1,0 +1,28 @@
+#include "mild_lcd/features/akaze_extractor.hpp"
+
+#include <cmath>
+#include <string>
+
+#include "mild_lcd/common/errors.hpp"
+
+namespace mild {
+namespace {
+
+// AKAZE's descriptor samples a 20-sigma window; on thinner images no keypoint survives and the
+// nonlinear scale space has nothing to build on.
+constexpr int kMinSide = 32;
+
+}  // namespace
+
+AkazeExtractor::AkazeExtractor(const AkazeParams& params) : params_((params.validate(), params)) {
+  // The full M-LDB descriptor (size 0 = all 486 bits, 3 channels: intensity and both gradients).
+  akaze_ = cv::AKAZE::create(cv::AKAZE::DESCRIPTOR_MLDB, 0, 3, static_cast<float>(params_.threshold), params_.octaves,
+                             params_.octave_layers, cv::KAZE::DIFF_PM_G2);
+}
+
+Features AkazeExtractor::extract(const cv::Mat& image, PixelFormat format) const {
+  return detectAndDescribe(*akaze_, toGray(image, format), static_cast<size_t>(params_.num_features), kMinSide,
+                           kDescriptorBytes, kName);
+}
+
+}  // namespace mild

@@ -1,0 +1,187 @@
+// Any binary descriptor, end to end: the pipeline on BRISK's 512 bits and AKAZE's 486 (61 bytes)
+// finds the fixture's loop as ORB's 256 do; the map file records the width and a detector of
+// another width refuses it by name; keyframes of the wrong width are refused without a trace.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <random>
+#include <set>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "random_descriptors.hpp"
+
+namespace fs = std::filesystem;
+
+namespace mild {
+namespace {
+
+const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+
+const std::vector<cv::Mat>& fixtureFrames() {
+  static const std::vector<cv::Mat> frames = [] {
+    std::vector<std::string> files;
+    for (const auto& e : fs::directory_iterator(kFixture + "/images")) files.push_back(e.path().string());
+    std::sort(files.begin(), files.end());
+    std::vector<cv::Mat> out;
+    for (const auto& f : files) out.push_back(cv::imread(f, cv::IMREAD_GRAYSCALE));
+    return out;
+  }();
+  return frames;
+}
+
+DetectorParams paramsFor(const std::string& type) {
+  DetectorParams p;
+  p.features.type = type;
+  p.candidates.exclusion_frames = 8;  // the bench's 40 frames at a stride of 5
+  return p;
+}
+
+struct FixtureRun {
+  Metrics metrics;
+  std::set<int> accepted_true, accepted_false;
+};
+
+FixtureRun runFixture(LoopDetector& detector) {
+  const GroundTruth truth = loadGroundTruth(kFixture + "/gt_loops.txt");
+  FixtureRun run;
+  std::vector<ScoredPair> reported;
+  for (size_t i = 0; i < fixtureFrames().size(); ++i) {
+    const DetectionResult r = detector.process(fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
+    for (const LoopCandidate& c : r.candidates) {
+      if (!c.verification.verified) continue;
+      reported.push_back({static_cast<int>(i), static_cast<int>(c.id), c.probability});
+      if (!c.accepted) continue;
+      const std::pair<int, int> pair(static_cast<int>(i), static_cast<int>(c.id));
+      (truth.right.count(pair) || truth.dont_care.count(pair) ? run.accepted_true : run.accepted_false)
+          .insert(pair.first);
+    }
+  }
+  run.metrics = evaluate(truth, reported, 8);
+  return run;
+}
+
+class DescriptorWidths : public ::testing::TestWithParam<std::pair<const char*, int>> {};
+
+TEST_P(DescriptorWidths, ThePipelineFindsTheFixtureLoop) {
+  const auto [type, bytes] = GetParam();
+  LoopDetector detector(paramsFor(type));
+  ASSERT_EQ(detector.descriptorBytes(), bytes);
+  const FixtureRun run = runFixture(detector);
+  EXPECT_TRUE(run.accepted_false.empty()) << type << ": " << run.accepted_false.size() << " wrong accepted loops";
+  // 13 loop queries (47-59); ORB finds 6 or more (test_loop_detector).
+  EXPECT_GE(run.accepted_true.size(), 4u) << type;
+  EXPECT_GE(run.metrics.recall_at_100_precision, 0.3) << type;
+  RecordProperty(std::string(type) + "_recall_at_100p", std::to_string(run.metrics.recall_at_100_precision));
+  // Every stored descriptor has the width, and the index cut it into 16-bit (or 15-16) tables.
+  for (KeyframeIndex k = 0; k < detector.size(); ++k) {
+    for (const Descriptor& d : detector.database().descriptors(k)) ASSERT_EQ(d.bytes, bytes);
+  }
+  EXPECT_EQ(detector.database().index().layout().bits(), bytes * 8);
+  EXPECT_EQ(detector.database().index().layout().count(), (bytes * 8 + 15) / 16);
+}
+
+INSTANTIATE_TEST_SUITE_P(Extractors, DescriptorWidths,
+                         ::testing::Values(std::make_pair("orb", 32), std::make_pair("brisk", 64),
+                                           std::make_pair("akaze", 61)),
+                         [](const auto& info) { return std::string(info.param.first); });
+
+class MapFiles : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("mild_widths_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+TEST_F(MapFiles, RecordTheWidthAndAreRefusedByADetectorOfAnother) {
+  LoopDetector brisk(paramsFor("brisk"));
+  for (size_t i = 0; i < 20; ++i) brisk.process(fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
+  saveDetector(brisk, path("brisk.mild"));
+  EXPECT_EQ(readDetectorFile(path("brisk.mild")).descriptor_bytes, 64);
+
+  // Resumed by a BRISK detector: the same answer to the next frame as the one that never stopped.
+  LoopDetector resumed(paramsFor("brisk"));
+  loadDetector(resumed, path("brisk.mild"), true);
+  EXPECT_EQ(resumed.process(fixtureFrames()[20], PixelFormat::kGray, 10.0).similarity,
+            brisk.process(fixtureFrames()[20], PixelFormat::kGray, 10.0).similarity);
+
+  // An ORB detector refuses it, naming both widths, and stays as it was (also for a merge).
+  LoopDetector orb(paramsFor("orb"));
+  orb.process(fixtureFrames()[0], PixelFormat::kGray, 0.0);
+  for (bool merge : {false, true}) {
+    try {
+      if (merge) {
+        mergeDetector(orb, path("brisk.mild"));
+      } else {
+        loadDetector(orb, path("brisk.mild"), false);
+      }
+      ADD_FAILURE() << "a 64-byte map was loaded into a 32-byte detector";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("64-byte"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("32-byte"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(orb.size(), 1u);
+  }
+}
+
+TEST(KeyframeWidths, AKeyframeOfAnotherWidthIsRefusedAndChangesNothing) {
+  LoopDetector brisk(paramsFor("brisk"));
+  brisk.process(fixtureFrames()[0], PixelFormat::kGray, 0.0);
+  std::mt19937_64 rng(4);
+  Features orb_features;
+  orb_features.descriptors = test::randomDescriptors(50, rng, 32);
+  orb_features.keypoints.assign(50, cv::KeyPoint(10.0f, 10.0f, 7.0f));
+  try {
+    brisk.process(orb_features, 1.0);
+    FAIL() << "32-byte descriptors entered a 64-byte database";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("32 bytes wide; this database holds 64-byte"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(brisk.size(), 1u);
+  EXPECT_EQ(brisk.nextId(), 1u);
+  // Mixed widths within one keyframe are refused as well.
+  Features mixed;
+  mixed.descriptors = test::randomDescriptors(3, rng, 64);
+  mixed.descriptors.push_back(test::randomDescriptor(rng, 32));
+  mixed.keypoints.assign(4, cv::KeyPoint(10.0f, 10.0f, 7.0f));
+  EXPECT_THROW(brisk.process(mixed, 1.0), InvalidInput);
+  EXPECT_EQ(brisk.size(), 1u);
+  // The right width goes in.
+  Features wide;
+  wide.descriptors = test::randomDescriptors(50, rng, 64);
+  wide.keypoints.assign(50, cv::KeyPoint(10.0f, 10.0f, 7.0f));
+  EXPECT_NO_THROW(brisk.process(wide, 1.0));
+  EXPECT_EQ(brisk.size(), 2u);
+}
+
+TEST(KeyframeWidths, ADatabaseOfAFrontEndsOwnWidthTakesKeyframesButRefusesImages) {
+  DetectorParams p = paramsFor("orb");
+  p.features.descriptor_bytes = 16;  // BRIEF-16 from a front-end
+  LoopDetector detector(p);
+  EXPECT_EQ(detector.descriptorBytes(), 16);
+  std::mt19937_64 rng(8);
+  for (int k = 0; k < 3; ++k) {
+    Features f;
+    f.descriptors = test::randomDescriptors(40, rng, 16);
+    f.keypoints.assign(40, cv::KeyPoint(10.0f, 10.0f, 7.0f));
+    EXPECT_NO_THROW(detector.process(f, 1.0 * k));
+  }
+  try {
+    detector.process(fixtureFrames()[0], PixelFormat::kGray, 5.0);
+    FAIL() << "an ORB image went into a 16-byte database";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("give it Keyframes"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(detector.size(), 3u);
+}
+
+}  // namespace
+}  // namespace mild
