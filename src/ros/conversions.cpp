@@ -210,11 +210,14 @@ mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
 }
 
 mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
-                                       size_t database_size, bool correspondences) {
+                                       size_t database_size, bool correspondences,
+                                       const std::vector<std::string>& robot_names) {
+  const auto robotName = [&](uint32_t robot) { return robot < robot_names.size() ? robot_names[robot] : ""; };
   mild_lcd::LoopClosure msg;
   msg.header = header;
   msg.query_id = result.query_id;
   msg.query_session = result.query_session;
+  msg.query_robot = robotName(result.query_robot);
   msg.features = static_cast<int32_t>(result.stats.features);
   msg.database_size = static_cast<int32_t>(database_size);
   msg.extract_ms = result.stats.extract_ms;
@@ -226,6 +229,7 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
     mild_lcd::LoopCandidate m;
     m.id = c.id;
     m.session = c.session;
+    m.robot = robotName(c.robot);
     m.stamp = stampOf(c.stamp);
     m.probability = c.probability;
     m.accepted = c.accepted;

@@ -1,12 +1,24 @@
 #include "mild_lcd/ros/database_store.hpp"
 
+#include <filesystem>
+
 #include "mild_lcd/common/errors.hpp"
 
 namespace mild_lcd {
+namespace {
 
-DatabaseStore::DatabaseStore(const NodeSettings& settings)
-    : directory_(settings.database_dir),
-      database_path_(settings.database_path),
+std::string robotPath(const std::string& path, const std::string& robot) {
+  if (path.empty() || robot.empty()) return path;
+  const std::filesystem::path p(path);
+  return (p.parent_path() / robot / p.filename()).string();
+}
+
+}  // namespace
+
+DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const std::string& robot_name)
+    : robot_(robot),
+      directory_(settings.database_dir),
+      database_path_(robotPath(settings.database_path, robot_name)),
       load_on_start_(settings.load_on_start),
       save_on_shutdown_(settings.save_on_shutdown),
       max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
@@ -30,16 +42,17 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
   try {
     const mild::ConfinedFile file = resolve("", false);
     if (!file.exists()) return "database " + file.display() + " does not exist yet: starting with an empty map";
-    mild::PreparedLoad prepared = mild::prepareLoad(*shared.detector, file, false, max_bytes_);
+    mild::PreparedLoad prepared = mild::prepareLoad(detector(shared), file, false, max_bytes_);
     const std::string message = prepared.report.message;
     std::lock_guard<std::mutex> lock(shared.mutex);
-    mild::commitLoad(*shared.detector, std::move(prepared));
+    mild::commitLoad(detector(shared), std::move(prepared));
+    shared.team->mapChanged(robot_);
     return message;
   } catch (const std::exception& e) {
     saves_allowed_ = false;
     std::lock_guard<std::mutex> lock(shared.mutex);
-    shared.failure = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
-                     "); the file is left untouched and nothing will be saved over it";
+    failure(shared) = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
+                      "); the file is left untouched and nothing will be saved over it";
     throw;
   }
 }
@@ -47,20 +60,21 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
 std::string DatabaseStore::save(SharedDetector& shared, const std::string& requested) {
   const mild::ConfinedFile file = resolve(requested, true);
   std::lock_guard<std::mutex> lock(shared.mutex);
-  if (!shared.failure.empty()) throw mild::InvalidInput(shared.failure);
-  mild::saveDetector(*shared.detector, file);
-  return "saved " + std::to_string(shared.detector->size()) + " keyframes to " + file.display();
+  if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
+  mild::saveDetector(detector(shared), file);
+  return "saved " + std::to_string(detector(shared).size()) + " keyframes to " + file.display();
 }
 
 mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
   const mild::ConfinedFile file = resolve(requested, false);
   // LoopDetector's parameters never change after construction: preparing needs no lock.
-  mild::PreparedLoad prepared = mild::prepareLoad(*shared.detector, file, continue_session, max_bytes_);
+  mild::PreparedLoad prepared = mild::prepareLoad(detector(shared), file, continue_session, max_bytes_);
   mild::LoadReport report = prepared.report;
   std::lock_guard<std::mutex> lock(shared.mutex);
-  mild::commitLoad(*shared.detector, std::move(prepared));
+  mild::commitLoad(detector(shared), std::move(prepared));
+  shared.team->mapChanged(robot_);
   // A map loaded by hand is the user's decision: the start-up failure no longer stands in the way.
-  shared.failure.clear();
+  failure(shared).clear();
   saves_allowed_ = true;
   return report;
 }
@@ -70,8 +84,12 @@ mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string&
   mild::DetectorState state = mild::readDetectorFile(file, max_bytes_);
   std::lock_guard<std::mutex> lock(shared.mutex);
   // Merging into the empty map of a failed start-up would save over the map that failed: refused.
-  if (!shared.failure.empty()) throw mild::InvalidInput(shared.failure + "; load_database without merge replaces it");
-  return mild::mergeState(*shared.detector, std::move(state), file.display());
+  if (!failure(shared).empty()) {
+    throw mild::InvalidInput(failure(shared) + "; load_database without merge replaces it");
+  }
+  mild::LoadReport report = mild::mergeState(detector(shared), std::move(state), file.display());
+  shared.team->mapChanged(robot_);
+  return report;
 }
 
 std::string DatabaseStore::saveOnShutdown(SharedDetector& shared) {

@@ -1,5 +1,6 @@
 #include "mild_lcd/ros/debug_image.hpp"
 
+#include <algorithm>
 #include <string>
 
 #include <opencv2/features2d.hpp>
@@ -7,7 +8,8 @@
 
 namespace mild_lcd {
 
-void DebugImageCache::remember(uint64_t id, const cv::Mat& image, mild::PixelFormat format) {
+void DebugImageCache::remember(uint64_t id, const cv::Mat& image, mild::PixelFormat format, uint32_t robot) {
+  const Key key(robot, id);
   if (max_images_ == 0 || max_bytes_ == 0 || image.empty()) return;
   cv::Mat small;
   const cv::Mat gray = mild::toGray(image, format);
@@ -20,13 +22,13 @@ void DebugImageCache::remember(uint64_t id, const cv::Mat& image, mild::PixelFor
   const size_t size = small.total() * small.elemSize();
   if (size > max_bytes_) return;
   std::lock_guard<std::mutex> lock(mutex_);
-  auto it = images_.find(id);
+  auto it = images_.find(key);
   if (it != images_.end()) {
     bytes_ -= it->second.total() * it->second.elemSize();
     it->second = small;
   } else {
-    images_.emplace(id, small);
-    order_.push_back(id);
+    images_.emplace(key, small);
+    order_.push_back(key);
   }
   bytes_ += size;
   evict();
@@ -43,9 +45,9 @@ void DebugImageCache::evict() {
   }
 }
 
-cv::Mat DebugImageCache::find(uint64_t id) const {
+cv::Mat DebugImageCache::find(uint64_t id, uint32_t robot) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  auto it = images_.find(id);
+  auto it = images_.find(Key(robot, id));
   return it == images_.end() ? cv::Mat() : it->second;
 }
 
@@ -54,6 +56,20 @@ void DebugImageCache::clear() {
   images_.clear();
   order_.clear();
   bytes_ = 0;
+}
+
+void DebugImageCache::clear(uint32_t robot) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto it = images_.begin(); it != images_.end();) {
+    if (it->first.first == robot) {
+      bytes_ -= it->second.total() * it->second.elemSize();
+      it = images_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  order_.erase(std::remove_if(order_.begin(), order_.end(), [&](const Key& k) { return k.first == robot; }),
+               order_.end());
 }
 
 size_t DebugImageCache::bytes() const {

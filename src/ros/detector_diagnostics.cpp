@@ -16,8 +16,14 @@ void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& 
     // Never wait for a keyframe in progress: a busy worker refreshes the snapshot itself.
     std::unique_lock<std::mutex> lock(shared_.mutex, std::try_to_lock);
     if (lock.owns_lock()) {
-      worker_.refreshSnapshot(*shared_.detector);
-      failure_ = shared_.failure;
+      worker_.refreshSnapshot(*shared_.team);
+      failure_.clear();
+      for (size_t r = 0; r < shared_.failure.size(); ++r) {
+        if (shared_.failure[r].empty()) continue;
+        const std::string& name = shared_.team->name(r);
+        failure_ += (failure_.empty() ? "" : "; ") + (name.empty() ? "" : name + ": ") + shared_.failure[r];
+      }
+      robots_ = shared_.team->size();
     }
   }
   const WorkerCounters c = worker_.counters();
@@ -31,6 +37,7 @@ void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& 
   }
   reported_dropped_ = c.dropped;
   reported_rejected_ = c.rejected;
+  if (robots_ > 1) status.add("robots", robots_);
   status.add("database keyframes", c.keyframes);
   status.add("database features", c.features);
   status.add("memory (MB)", static_cast<double>(c.memory_bytes) / 1e6);

@@ -28,6 +28,7 @@ class DetectorDiagnostics {
   ros::WallTimer timer_;
   size_t reported_dropped_ = 0, reported_rejected_ = 0;
   std::string failure_;
+  size_t robots_ = 1;
 };
 
 }  // namespace mild_lcd

@@ -13,20 +13,25 @@ mild::VerificationParams alwaysOn(mild::VerificationParams p) {
 
 }  // namespace
 
-DetectorServices::DetectorServices(const ros::NodeHandle& nh, const std::string& log_name, SharedDetector& shared,
-                                   DatabaseStore& store, KeyframeWorker& worker, DebugImageCache& debug_cache,
-                                   size_t max_match_features)
-    : log_name_(log_name),
+DetectorServices::DetectorServices(const ros::NodeHandle& robot_nh, const ros::NodeHandle* reset_nh, size_t robot,
+                                   const std::string& log_name, SharedDetector& shared, DatabaseStore& store,
+                                   KeyframeWorker& worker, DebugImageCache& debug_cache, size_t max_match_features)
+    : robot_(robot),
+      log_name_(log_name),
       shared_(shared),
       store_(store),
       worker_(worker),
       debug_cache_(debug_cache),
       max_match_features_(max_match_features),
-      verifier_(std::make_unique<mild::GeometricVerifier>(alwaysOn(shared.detector->params().verification))),
-      nh_(nh) {
+      verifier_(std::make_unique<mild::GeometricVerifier>(alwaysOn(shared.team->params().verification))),
+      nh_(robot_nh) {
   nh_.setCallbackQueue(&queue_);
   match_srv_ = nh_.advertiseService("sparse_match", &DetectorServices::sparseMatch, this);
-  reset_srv_ = nh_.advertiseService("reset", &DetectorServices::reset, this);
+  if (reset_nh) {
+    reset_nh_ = *reset_nh;
+    reset_nh_.setCallbackQueue(&queue_);
+    reset_srv_ = reset_nh_.advertiseService("reset", &DetectorServices::reset, this);
+  }
   save_srv_ = nh_.advertiseService("save_database", &DetectorServices::save, this);
   load_srv_ = nh_.advertiseService("load_database", &DetectorServices::load, this);
   spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
@@ -47,16 +52,16 @@ void DetectorServices::shutdown() {
 bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild_lcd::SparseMatch::Response& response) {
   const auto stored = [this](uint64_t id) -> std::optional<mild::Features> {
     std::lock_guard<std::mutex> lock(shared_.mutex);  // a copy, then the lock is free again
-    auto k = shared_.detector->find(id);
+    auto k = detector().find(id);
     if (!k) return std::nullopt;
-    return shared_.detector->features(*k);
+    return detector().features(*k);
   };
   {
     // The verification parameters may have been retuned (dynamic_reconfigure) since it was built.
     std::lock_guard<std::mutex> lock(shared_.mutex);
-    if (shared_.detector->retunes() != verifier_retunes_) {
-      verifier_ = std::make_unique<mild::GeometricVerifier>(alwaysOn(shared_.detector->params().verification));
-      verifier_retunes_ = shared_.detector->retunes();
+    if (shared_.team->retunes() != verifier_retunes_) {
+      verifier_ = std::make_unique<mild::GeometricVerifier>(alwaysOn(shared_.team->params().verification));
+      verifier_retunes_ = shared_.team->retunes();
     }
   }
   response = mild_lcd::sparseMatch(request, stored, *verifier_, max_match_features_);
@@ -67,11 +72,11 @@ bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild
 bool DetectorServices::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
   const size_t pending = worker_.discardPending();
   std::lock_guard<std::mutex> lock(shared_.mutex);
-  const size_t keyframes = shared_.detector->size();
-  shared_.detector->reset();
-  shared_.failure.clear();
+  const size_t keyframes = shared_.team->keyframes();
+  shared_.team->reset();
+  for (std::string& f : shared_.failure) f.clear();
   debug_cache_.clear();
-  worker_.refreshSnapshot(*shared_.detector);
+  worker_.refreshSnapshot(*shared_.team);
   response.success = true;
   response.message = "cleared " + std::to_string(keyframes) + " keyframes and " + std::to_string(pending) +
                      " waiting in the queue (counted as discarded)";
@@ -101,7 +106,7 @@ bool DetectorServices::load(mild_lcd::LoadDatabase::Request& request, mild_lcd::
       response.message = store_.merge(shared_, request.path).message;  // ids stay: the debug cache too
     } else {
       response.message = store_.load(shared_, request.path, request.continue_session).message;
-      debug_cache_.clear();
+      debug_cache_.clear(static_cast<uint32_t>(robot_));
     }
     response.success = true;
     ROS_INFO_STREAM_NAMED(log_name_, response.message);
@@ -111,8 +116,8 @@ bool DetectorServices::load(mild_lcd::LoadDatabase::Request& request, mild_lcd::
     ROS_WARN_STREAM_NAMED(log_name_, "load_database: " << e.what());
   }
   std::lock_guard<std::mutex> lock(shared_.mutex);
-  response.keyframes = static_cast<uint32_t>(shared_.detector->size());
-  worker_.refreshSnapshot(*shared_.detector);
+  response.keyframes = static_cast<uint32_t>(detector().size());
+  worker_.refreshSnapshot(*shared_.team);
   return true;
 }
 

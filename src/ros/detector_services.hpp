@@ -1,8 +1,10 @@
 #pragma once
 
-// The nodelet's services: sparse_match, reset, save_database, load_database. They are served by a
-// thread and callback queue of their own, so that a long request never occupies the manager
-// threads that deliver keyframes, and they hold the detector lock only to copy or swap state.
+// The nodelet's services: sparse_match, save_database, load_database for one robot's map (in the
+// robot's namespace when the node serves several), and reset of every map (in the node's namespace,
+// advertised by the first robot's services). They are served by a thread and callback queue of
+// their own, so that a long request never occupies the manager threads that deliver keyframes, and
+// they hold the detector lock only to copy or swap state.
 
 #include <memory>
 #include <string>
@@ -24,8 +26,10 @@ namespace mild_lcd {
 
 class DetectorServices {
  public:
-  DetectorServices(const ros::NodeHandle& nh, const std::string& log_name, SharedDetector& shared, DatabaseStore& store,
-                   KeyframeWorker& worker, DebugImageCache& debug_cache, size_t max_match_features);
+  // `robot_nh`: where the robot's services go; `reset_nh`: where reset goes (none: not here).
+  DetectorServices(const ros::NodeHandle& robot_nh, const ros::NodeHandle* reset_nh, size_t robot,
+                   const std::string& log_name, SharedDetector& shared, DatabaseStore& store, KeyframeWorker& worker,
+                   DebugImageCache& debug_cache, size_t max_match_features);
   ~DetectorServices();
   void shutdown();
 
@@ -35,6 +39,9 @@ class DetectorServices {
   bool save(mild_lcd::SaveDatabase::Request& request, mild_lcd::SaveDatabase::Response& response);
   bool load(mild_lcd::LoadDatabase::Request& request, mild_lcd::LoadDatabase::Response& response);
 
+  mild::LoopDetector& detector() { return shared_.robot(robot_); }
+
+  size_t robot_;
   std::string log_name_;
   SharedDetector& shared_;
   DatabaseStore& store_;
@@ -47,7 +54,7 @@ class DetectorServices {
   uint64_t verifier_retunes_ = 0;
 
   ros::CallbackQueue queue_;
-  ros::NodeHandle nh_;
+  ros::NodeHandle nh_, reset_nh_;
   std::unique_ptr<ros::AsyncSpinner> spinner_;
   ros::ServiceServer match_srv_, reset_srv_, save_srv_, load_srv_;
 };

@@ -16,18 +16,18 @@ DetectorTuning::DetectorTuning(const ros::NodeHandle& pnh, const std::string& lo
       std::make_unique<dynamic_reconfigure::Server<mild_lcd::TuningConfig>>(mutex_, ros::NodeHandle(pnh, "tuning"));
   {
     std::lock_guard<std::mutex> lock(shared_.mutex);
-    server_->updateConfig(tuningConfigOf(shared_.detector->params()));  // not the cfg's defaults
+    server_->updateConfig(tuningConfigOf(shared_.team->params()));  // not the cfg's defaults
   }
   server_->setCallback([this](mild_lcd::TuningConfig& config, uint32_t level) { apply(config, level); });
 }
 
 void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
   std::lock_guard<std::mutex> lock(shared_.mutex);
-  mild::LoopDetector& detector = *shared_.detector;
+  mild::RobotTeam& team = *shared_.team;
   try {
-    const mild::DetectorParams next = paramsFromTuning(config, detector.params());
-    if (mild::describeParameters(next) == mild::describeParameters(detector.params())) return;
-    detector.retune(next);
+    const mild::DetectorParams next = paramsFromTuning(config, team.params());
+    if (mild::describeParameters(next) == mild::describeParameters(team.params())) return;
+    team.retune(next);
     ROS_INFO_STREAM_NAMED(log_name_, "retuned: max_candidates " << next.candidates.max_candidates << ", exclusion "
                                                                 << next.candidates.exclusion_frames
                                                                 << " keyframes, decision probability "
@@ -35,7 +35,7 @@ void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
                                                                 << next.verification.min_inliers);
   } catch (const mild::InvalidInput& e) {
     ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure change refused, values kept: " << e.what());
-    config = tuningConfigOf(detector.params());  // the server answers and publishes what holds
+    config = tuningConfigOf(team.params());  // the server answers and publishes what holds
   }
 }
 

@@ -44,12 +44,14 @@ void KeyframeWorker::run() {
   }
 }
 
-void KeyframeWorker::refreshSnapshot(const mild::LoopDetector& detector) {
+void KeyframeWorker::refreshSnapshot(const mild::RobotTeam& team) {
+  size_t discarded_buckets = 0;
+  for (size_t r = 0; r < team.size(); ++r) discarded_buckets += team.robot(r).database().index().discardedBuckets();
   std::lock_guard<std::mutex> lock(stats_mutex_);
-  stats_.keyframes = detector.size();
-  stats_.features = detector.database().featureCount();
-  stats_.memory_bytes = detector.memoryBytes();
-  stats_.discarded_buckets = detector.database().index().discardedBuckets();
+  stats_.keyframes = team.keyframes();
+  stats_.features = team.features();
+  stats_.memory_bytes = team.memoryBytes();
+  stats_.discarded_buckets = discarded_buckets;
 }
 
 void KeyframeWorker::process(const KeyframeInput& input) {
@@ -69,23 +71,26 @@ void KeyframeWorker::process(const KeyframeInput& input) {
     }
     const bool keypoints = hooks_.wants_keypoints && hooks_.wants_keypoints();
     std::lock_guard<std::mutex> lock(shared_.mutex);
-    if (!shared_.failure.empty()) throw mild::InvalidInput(shared_.failure);
+    mild::RobotTeam& team = *shared_.team;
+    if (input.robot < shared_.failure.size() && !shared_.failure[input.robot].empty()) {
+      throw mild::InvalidInput(shared_.failure[input.robot]);
+    }
     // Only this call changes the detector; it throws before changing anything.
-    out.result = out.image.image.empty()
-                     ? shared_.detector->process(std::move(features), out.header.stamp.toSec(), id)
-                     : shared_.detector->process(out.image.image, out.image.format, out.header.stamp.toSec(),
-                                                 std::nullopt, input.camera);
-    out.database_size = shared_.detector->size();
+    out.result = out.image.image.empty() ? team.process(input.robot, std::move(features), out.header.stamp.toSec(), id)
+                                         : team.process(input.robot, out.image.image, out.image.format,
+                                                        out.header.stamp.toSec(), std::nullopt, input.camera);
+    out.database_size = team.robot(input.robot).size();
     if (keypoints) {
-      out.query_keypoints = shared_.detector->record(out.result.query_index).keypoints;
+      out.query_keypoints = team.robot(input.robot).record(out.result.query_index).keypoints;
       if (!out.result.candidates.empty()) {
-        out.candidate_keypoints = shared_.detector->record(out.result.candidates.front().index).keypoints;
+        const mild::LoopCandidate& best = out.result.candidates.front();
+        out.candidate_keypoints = team.robot(best.robot).record(best.index).keypoints;
       }
     }
     // memoryBytes() walks every keyframe: once a second.
     const auto now = std::chrono::steady_clock::now();
     if (now >= next_snapshot_) {
-      refreshSnapshot(*shared_.detector);
+      refreshSnapshot(team);
       next_snapshot_ = now + std::chrono::seconds(1);
       // The index's arrays grow by reallocation; glibc keeps the smaller copies they leave behind,
       // and the process would grow about 2.5 times as fast as the map. Handing free pages back once

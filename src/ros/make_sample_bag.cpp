@@ -36,10 +36,13 @@ int main(int argc, char** argv) {
   std::vector<double> camera;
   std::string features = "orb";
   bool no_images = false;
+  std::vector<size_t> range;
   app.add_option("--images", images, "sequence folder (frames, or an images/ subfolder)")->required();
   app.add_option("--output", output, "bag file to write")->required();
   app.add_option("--image-topic", image_topic, "raw images; compressed ones go to <topic>/compressed");
   app.add_flag("--no-images", no_images, "write no images, only Keyframes");
+  app.add_option("--frames", range, "FIRST LAST: only frames FIRST..LAST-1 (ids and stamps stay the frames' own)")
+      ->expected(2);
   app.add_option("--keyframe-topic", keyframe_topic, "mild_lcd/Keyframe messages");
   app.add_option("--keyframe-id-offset", id_offset, "Keyframe.id = frame index + this");
   app.add_option("--start", start, "time stamp of the first frame, seconds");
@@ -68,7 +71,11 @@ int main(int argc, char** argv) {
       mild_lcd::intrinsicsFromMsg(info);  // refuses what the node would refuse
     }
     rosbag::Bag bag(output, rosbag::bagmode::Write);
-    for (size_t i = 0; i < seq.frames.size(); ++i) {
+    const size_t first = range.empty() ? 0 : range[0];
+    const size_t last = range.empty() ? seq.frames.size() : std::min(range[1], seq.frames.size());
+    if (first >= last)
+      throw mild::InvalidInput("--frames: no frame in " + std::to_string(first) + ".." + std::to_string(last));
+    for (size_t i = first; i < last; ++i) {
       const cv::Mat image = cv::imread(seq.frames[i], cv::IMREAD_GRAYSCALE);
       if (image.empty()) throw mild::InvalidInput(seq.frames[i] + ": cannot read the image");
       std_msgs::Header header;
@@ -112,7 +119,7 @@ int main(int argc, char** argv) {
       }
     }
     bag.close();
-    std::cout << "wrote " << seq.frames.size() << " frames to " << output << "\n";
+    std::cout << "wrote " << last - first << " frames to " << output << "\n";
     return 0;
   });
 }

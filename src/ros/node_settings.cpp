@@ -1,6 +1,7 @@
 #include "mild_lcd/ros/node_settings.hpp"
 
 #include <algorithm>
+#include <cctype>
 #include <filesystem>
 #include <limits>
 #include <sstream>
@@ -46,6 +47,10 @@ void visitSettings(Settings& s, Visit&& visit) {
         "database files larger than this are refused unread");
   visit("max_match_features", s.max_match_features, Bounds::in(1, 10000000),
         "descriptors per side of a sparse_match request, at most");
+  visit("robots", s.robots, Bounds::any(),
+        "names of the robots this node serves, space- or comma-separated (`robot1 robot2`): each robot's topics and "
+        "services go under its name (`robot1/keyframe`, `robot1/loop_closure`, `robot1/save_database`, ...), "
+        "`loop_closures_all` carries every robot's; empty: one robot, names as above");
 }
 
 template <class T>
@@ -104,6 +109,19 @@ NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::
   visitSettings(s, [](const char* name, const auto& field, const mild::Bounds& bounds, const char*) {
     bounds.check(std::string("parameter ~") + name, field);
   });
+  const std::vector<std::string> robots = s.robotNames();
+  for (size_t i = 0; i < robots.size(); ++i) {
+    const std::string& r = robots[i];
+    const bool valid =
+        std::isalpha(static_cast<unsigned char>(r.front())) &&
+        std::all_of(r.begin(), r.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; });
+    if (!valid) {
+      throw InvalidInput("parameter ~robots: '" + r + "' is not a robot name (a letter, then letters, digits or _)");
+    }
+    if (std::find(robots.begin(), robots.begin() + static_cast<long>(i), r) != robots.begin() + static_cast<long>(i)) {
+      throw InvalidInput("parameter ~robots names '" + r + "' twice");
+    }
+  }
   if (s.image_transport.empty())
     throw InvalidInput("parameter ~image_transport must name a transport (raw, compressed, ...)");
 
@@ -119,6 +137,20 @@ NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::
     s.database_dir = path.is_absolute() && path.has_parent_path() ? path.parent_path().string() : default_dir;
   }
   return s;
+}
+
+std::vector<std::string> NodeSettings::robotNames() const {
+  std::vector<std::string> names;
+  std::string name;
+  for (char c : robots + " ") {
+    if (c == ' ' || c == ',' || c == '\t') {
+      if (!name.empty()) names.push_back(name);
+      name.clear();
+    } else {
+      name += c;
+    }
+  }
+  return names;
 }
 
 void rejectUnknownParameters(const mild::ParameterSource& source) {

@@ -159,26 +159,26 @@ class Store : public ::testing::Test {
 // input) leaves the file as it is and keeps save_on_shutdown from writing over it.
 TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
   SharedDetector original;
-  original.detector = detector(120);
-  mild::saveDetector(*original.detector, (dir_ / "map.db").string());
+  original.setTeam(std::make_unique<mild::RobotTeam>(detector(120)));
+  mild::saveDetector(original.robot(0), (dir_ / "map.db").string());
   const auto size = fs::file_size(dir_ / "map.db");
   ASSERT_GT(size, 1u << 20);
 
   DatabaseStore store(
       settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\nmax_database_mb: 1\n"));
   SharedDetector running;
-  running.detector = detector(0);
+  running.setTeam(std::make_unique<mild::RobotTeam>(detector(0)));
   const std::string error = errorOf([&] { store.loadOnStart(running); });
   EXPECT_NE(error.find("allowed"), std::string::npos) << error;
-  EXPECT_FALSE(running.failure.empty()) << "keyframes are refused, saying why";
-  EXPECT_NE(running.failure.find("left untouched"), std::string::npos) << running.failure;
+  EXPECT_FALSE(running.failure[0].empty()) << "keyframes are refused, saying why";
+  EXPECT_NE(running.failure[0].find("left untouched"), std::string::npos) << running.failure[0];
   EXPECT_NE(store.saveOnShutdown(running).find("not saving"), std::string::npos);
   EXPECT_THROW(store.save(running, ""), mild::InvalidInput) << "nor through the service";
   // Merging into the empty stand-in would let a later save replace the map that failed.
   mild::saveDetector(*detector(2), (dir_ / "small.db").string());
   const std::string merge_error = errorOf([&] { store.merge(running, "small.db"); });
   EXPECT_NE(merge_error.find("without merge replaces it"), std::string::npos) << merge_error;
-  EXPECT_EQ(running.detector->size(), 0u);
+  EXPECT_EQ(running.robot(0).size(), 0u);
   EXPECT_EQ(fs::file_size(dir_ / "map.db"), size) << "the map is untouched";
   EXPECT_EQ(mild::readDetectorFile((dir_ / "map.db").string()).records.size(), 120u);
 }
@@ -186,7 +186,7 @@ TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
 TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
   DatabaseStore store(settings("database_path: new.db\nload_on_start: true\nsave_on_shutdown: true\n"));
   SharedDetector running;
-  running.detector = detector(3);
+  running.setTeam(std::make_unique<mild::RobotTeam>(detector(3)));
   EXPECT_NE(store.loadOnStart(running).find("does not exist yet"), std::string::npos);
   EXPECT_NE(store.saveOnShutdown(running).find("saved 3 keyframes"), std::string::npos);
   EXPECT_EQ(mild::readDetectorFile((dir_ / "new.db").string()).records.size(), 3u);
@@ -195,7 +195,7 @@ TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
 TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {
   DatabaseStore store(settings());
   SharedDetector shared;
-  shared.detector = detector(4);
+  shared.setTeam(std::make_unique<mild::RobotTeam>(detector(4)));
   std::ofstream(dir_.parent_path() / "victim.txt") << "precious";
   for (const std::string& bad :
        {std::string("../victim.txt"), (dir_.parent_path() / "victim.txt").string(), std::string("")}) {
@@ -203,9 +203,9 @@ TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {
   }
   EXPECT_EQ(store.save(shared, "robot/one.db"), "saved 4 keyframes to " + (dir_ / "robot/one.db").string());
   SharedDetector other;
-  other.detector = detector(0);
+  other.setTeam(std::make_unique<mild::RobotTeam>(detector(0)));
   EXPECT_EQ(store.load(other, (dir_ / "robot/one.db").string(), false).keyframes, 4u);
-  EXPECT_EQ(other.detector->size(), 4u);
+  EXPECT_EQ(other.robot(0).size(), 4u);
   EXPECT_THROW(DatabaseStore(settings("database_path: /etc/passwd\n")), mild::InvalidInput)
       << "~database_path outside ~database_dir stops the node at start-up";
 }
@@ -229,7 +229,7 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
   SharedDetector shared;
   mild::DetectorParams p;
   p.verification.enabled = false;
-  shared.detector = std::make_unique<mild::LoopDetector>(p);
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>(p)));
   std::atomic<int> published{0};
   KeyframeWorker::Hooks hooks;
   hooks.publish = [&](const ProcessedKeyframe&) {
@@ -247,12 +247,12 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
   EXPECT_EQ(c.processed, 2u) << "the thin image is a keyframe, answered";
   EXPECT_EQ(c.rejected, 2u);
   EXPECT_EQ(published.load(), 2);
-  EXPECT_EQ(shared.detector->size(), 2u);
+  EXPECT_EQ(shared.robot(0).size(), 2u);
 }
 
 TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   SharedDetector shared;
-  shared.detector = std::make_unique<mild::LoopDetector>();
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
   std::mutex gate;
   std::unique_lock<std::mutex> hold(gate);  // the first keyframe waits here until we let it go
   KeyframeWorker::Hooks hooks;
@@ -416,7 +416,7 @@ TEST(Conversions, MetricPosesAndCorrespondencesArePublishedWhenAskedFor) {
 
 TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
   SharedDetector shared;
-  shared.detector = std::make_unique<mild::LoopDetector>();
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
   KeyframeWorker::Hooks hooks;
   hooks.publish = [](const ProcessedKeyframe&) {};
   KeyframeWorker worker(shared, 10, 1000 * 1000, hooks);
@@ -425,9 +425,9 @@ TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
   worker.push({image(200, 150, 1.0), nullptr, nullptr, camera});
   worker.push({image(200, 150, 2.0), nullptr, nullptr, {}});
   worker.waitIdle();
-  ASSERT_EQ(shared.detector->size(), 2u);
-  EXPECT_EQ(shared.detector->record(0).camera, camera);
-  EXPECT_FALSE(shared.detector->record(1).camera.known());
+  ASSERT_EQ(shared.robot(0).size(), 2u);
+  EXPECT_EQ(shared.robot(0).record(0).camera, camera);
+  EXPECT_FALSE(shared.robot(0).record(1).camera.known());
 }
 
 }  // namespace

@@ -79,6 +79,7 @@ struct DetectorParams {
 struct LoopCandidate {
   uint64_t id = 0;          // the candidate keyframe's id
   uint32_t session = 0;     // and its session
+  uint32_t robot = 0;       // and the robot whose map holds it (RobotTeam; 0 for a lone detector)
   KeyframeIndex index = 0;  // its position in the database
   double stamp = 0.0;
   double probability = 0.0;         // calibrated loop probability (CandidateScorer)
@@ -102,6 +103,7 @@ struct StepStats {
 struct DetectionResult {
   uint64_t query_id = 0;
   uint32_t query_session = 0;
+  uint32_t query_robot = 0;  // RobotTeam: the robot that saw the query
   KeyframeIndex query_index = 0;
   std::vector<LoopCandidate> candidates;  // best first
   std::vector<double> similarity;         // Phi' against every eligible keyframe (by database index)
@@ -139,6 +141,9 @@ struct PreparedRestore {
   KeyframeIndex session_start = 0;
   uint32_t session = 0;  // the session new keyframes join
 };
+
+// Sorts candidates best first by probability (stable) and drops those below min_probability.
+void rankCandidates(std::vector<LoopCandidate>& candidates, double min_probability);
 
 // Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
 constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
@@ -200,6 +205,14 @@ class LoopDetector {
   void merge(DetectorState state);
   PreparedRestore prepareMerge(DetectorState state) const;  // reads this detector: hold its lock
 
+  // Candidates for this detector's keyframe query_index from another map (another robot's, in a
+  // RobotTeam): chosen from `belief` over map's keyframes (a temporal filter's output for
+  // `similarity`), verified against the query (with its depths) and scored and ranked as this
+  // detector's own. Reads both detectors; changes neither.
+  std::vector<LoopCandidate> candidatesIn(const LoopDetector& map, const std::vector<double>& belief,
+                                          const std::vector<double>& similarity, KeyframeIndex query_index,
+                                          std::vector<float> query_depths = {}) const;
+
   // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
   KeyframeIndex sessionStart() const { return session_start_; }
   // The session new keyframes join: 0 at first, above every stored one after a load or merge
@@ -227,8 +240,12 @@ class LoopDetector {
   // or from the state.
   PreparedRestore build(DetectorState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
   KeyframeIndex eligibleCount(double stamp) const;
-  std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief,
-                                              const std::vector<double>& similarity) const;
+  // Local maxima of `belief` over map's keyframes, best first (this detector's or another's).
+  std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief, const std::vector<double>& similarity,
+                                              const LoopDetector& map) const;
+  // Verifies (when verifying), scores, judges and ranks candidates in `map` for keyframe query_index.
+  void judge(std::vector<LoopCandidate>& candidates, KeyframeIndex query_index, std::vector<float> query_depths,
+             const LoopDetector& map) const;
 
   DetectorParams params_;
   std::unique_ptr<FeatureExtractor> extractor_;

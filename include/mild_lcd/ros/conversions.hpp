@@ -60,9 +60,11 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg);
 
 // The answer published for one processed keyframe (candidate stamps come from the candidates).
-// With `correspondences`, verified candidates carry their inlier matches.
+// With `correspondences`, verified candidates carry their inlier matches. `robot_names`: the
+// robots of a RobotTeam by index (query_robot, each candidate's robot); none for one robot.
 mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, const std_msgs::Header& header,
-                                       size_t database_size, bool correspondences = false);
+                                       size_t database_size, bool correspondences = false,
+                                       const std::vector<std::string>& robot_names = {});
 
 // Serves a SparseMatch request. `stored` returns a copy of the features of a keyframe in the
 // database (none for an unknown id), so that the matching itself needs no lock on it. A side with

@@ -13,11 +13,15 @@
 
 namespace mild_lcd {
 
+// The maps of one robot of the team (robot 0: the only one of a usual node). With several robots,
+// robot N's ~database_path is the same file name in a folder N beside it (maps/site.mild ->
+// maps/N/site.mild), so that ~load_on_start and ~save_on_shutdown keep one map per robot.
 class DatabaseStore {
  public:
-  // Creates ~database_dir when absent and checks that ~database_path lies inside it. Throws
-  // mild::InvalidInput or mild::IoError.
-  explicit DatabaseStore(const NodeSettings& settings);
+  // Creates ~database_dir when absent and checks that the robot's ~database_path lies inside it.
+  // Throws mild::InvalidInput or mild::IoError.
+  explicit DatabaseStore(const NodeSettings& settings, size_t robot = 0, const std::string& robot_name = "");
+  const std::string& databasePath() const { return database_path_; }
   const std::string& directory() const { return directory_.root(); }
 
   // ~load_on_start: loads ~database_path as a new session (a missing file starts an empty map).
@@ -42,6 +46,10 @@ class DatabaseStore {
  private:
   mild::ConfinedFile resolve(const std::string& requested, bool for_saving) const;
 
+  mild::LoopDetector& detector(SharedDetector& shared) const { return shared.robot(robot_); }
+  std::string& failure(SharedDetector& shared) const { return shared.failure.at(robot_); }
+
+  size_t robot_;
   mild::DatabaseDirectory directory_;
   std::string database_path_;
   bool load_on_start_;

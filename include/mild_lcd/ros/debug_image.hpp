@@ -7,6 +7,7 @@
 #include <deque>
 #include <mutex>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -16,16 +17,18 @@
 
 namespace mild_lcd {
 
-// Half-resolution grey copies of the latest keyframes, bounded in count and in bytes.
+// Half-resolution grey copies of the latest keyframes, bounded in count and in bytes. A keyframe is
+// named by its robot (the index in the team; ids of two robots may coincide) and its id.
 class DebugImageCache {
  public:
   DebugImageCache(size_t max_images, size_t max_bytes) : max_images_(max_images), max_bytes_(max_bytes) {}
 
-  // Keeps a copy of `image` (of the given channel order) under `id`.
-  void remember(uint64_t id, const cv::Mat& image, mild::PixelFormat format);
+  // Keeps a copy of `image` (of the given channel order) under (robot, id).
+  void remember(uint64_t id, const cv::Mat& image, mild::PixelFormat format, uint32_t robot = 0);
   // Empty when not (or no longer) cached.
-  cv::Mat find(uint64_t id) const;
+  cv::Mat find(uint64_t id, uint32_t robot = 0) const;
   void clear();
+  void clear(uint32_t robot);  // one robot's, after its map was replaced
   size_t bytes() const;
   size_t size() const;
 
@@ -34,8 +37,12 @@ class DebugImageCache {
   const size_t max_images_;
   const size_t max_bytes_;
   mutable std::mutex mutex_;
-  std::unordered_map<uint64_t, cv::Mat> images_;
-  std::deque<uint64_t> order_;
+  using Key = std::pair<uint32_t, uint64_t>;  // robot, id
+  struct KeyHash {
+    size_t operator()(const Key& k) const { return std::hash<uint64_t>()(k.second * 31 + k.first); }
+  };
+  std::unordered_map<Key, cv::Mat, KeyHash> images_;
+  std::deque<Key> order_;
   size_t bytes_ = 0;
 };
 

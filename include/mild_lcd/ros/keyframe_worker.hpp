@@ -25,19 +25,21 @@
 namespace mild_lcd {
 
 // One keyframe as it arrived; exactly one pointer is set. `camera`: an image's intrinsics (from
-// camera_info) when known; a Keyframe message carries its own.
+// camera_info) when known; a Keyframe message carries its own. `robot`: whose keyframe it is (the
+// index in the team; 0 for one robot).
 struct KeyframeInput {
   sensor_msgs::ImageConstPtr image;
   sensor_msgs::CompressedImageConstPtr compressed;
   mild_lcd::KeyframeConstPtr keyframe;
   mild::CameraIntrinsics camera;
+  size_t robot = 0;
 };
 
 // One processed keyframe, for the publishers.
 struct ProcessedKeyframe {
   std_msgs::Header header;
-  mild::DetectionResult result;
-  size_t database_size = 0;
+  mild::DetectionResult result;                   // result.query_robot: whose keyframe it was
+  size_t database_size = 0;                       // of that robot's map
   DecodedImage image;                             // empty for keyframe (feature) input
   std::vector<cv::KeyPoint> query_keypoints;      // filled when `wants_keypoints` said so
   std::vector<cv::KeyPoint> candidate_keypoints;  // of the best candidate, likewise
@@ -71,8 +73,8 @@ class KeyframeWorker {
   void waitIdle() { queue_.waitIdle(); }
 
   WorkerCounters counters() const;
-  // Marks the database snapshot stale so the next keyframe (or a free detector) refreshes it.
-  void refreshSnapshot(const mild::LoopDetector& detector);
+  // Takes the database figures of diagnostics from the team (under its lock).
+  void refreshSnapshot(const mild::RobotTeam& team);
 
  private:
   void run();

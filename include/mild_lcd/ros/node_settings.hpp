@@ -27,6 +27,10 @@ struct NodeSettings {
   bool save_on_shutdown = false;
   int max_database_mb = 16384;     // larger files are refused unread
   int max_match_features = 10000;  // per side of a sparse_match request
+  std::string robots;              // names of the robots served, space- or comma-separated; "" = one
+
+  // The robots' names ("" = one robot, topics without a prefix), checked by load().
+  std::vector<std::string> robotNames() const;
 
   // Reads every setting the source holds, type-checked, and validates them. `default_dir` is where
   // maps go when ~database_dir is not set and ~database_path is relative or empty (the node passes

@@ -334,34 +334,51 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
 
   start = Clock::now();
   const std::vector<double>& belief = filter_->update(query.similarity);
-  result.candidates = selectCandidates(belief, query.similarity);
+  result.candidates = selectCandidates(belief, query.similarity, *this);
   result.stats.filter_ms = msSince(start);
 
-  if (verifier_ && !result.candidates.empty()) {
-    start = Clock::now();
-    Features query_features = this->features(result.query_index);
-    query_features.depths = std::move(features.depths);  // only the query's are needed (PnP), so none are stored
-    for (LoopCandidate& c : result.candidates)
-      c.verification = verifier_->verify(query_features, this->features(c.index));
-    result.stats.verify_ms = msSince(start);
-  }
-  for (LoopCandidate& c : result.candidates) {
-    c.probability = verifier_ ? scorer_.probability(c.filter_probability, c.verification) : c.filter_probability;
-    c.accepted = c.verification.verified && c.probability >= params_.scoring.decision_probability;
-  }
-  // Best first by the published probability (the filter's order among equals), at least
-  // detector/min_probability.
-  std::stable_sort(result.candidates.begin(), result.candidates.end(),
-                   [](const LoopCandidate& a, const LoopCandidate& b) { return a.probability > b.probability; });
-  result.candidates.erase(std::remove_if(result.candidates.begin(), result.candidates.end(),
-                                         [&](const LoopCandidate& c) { return c.probability < cp.min_probability; }),
-                          result.candidates.end());
+  start = Clock::now();
+  judge(result.candidates, result.query_index, std::move(features.depths), *this);
+  if (verifier_ && !result.candidates.empty()) result.stats.verify_ms = msSince(start);
   result.similarity = std::move(query.similarity);
   return result;
 }
 
+std::vector<LoopCandidate> LoopDetector::candidatesIn(const LoopDetector& map, const std::vector<double>& belief,
+                                                      const std::vector<double>& similarity, KeyframeIndex query_index,
+                                                      std::vector<float> query_depths) const {
+  std::vector<LoopCandidate> candidates = selectCandidates(belief, similarity, map);
+  judge(candidates, query_index, std::move(query_depths), map);
+  return candidates;
+}
+
+void LoopDetector::judge(std::vector<LoopCandidate>& candidates, KeyframeIndex query_index,
+                         std::vector<float> query_depths, const LoopDetector& map) const {
+  if (verifier_ && !candidates.empty()) {
+    Features query_features = features(query_index);
+    query_features.depths = std::move(query_depths);  // only the query's are needed (PnP), so none are stored
+    for (LoopCandidate& c : candidates) c.verification = verifier_->verify(query_features, map.features(c.index));
+  }
+  for (LoopCandidate& c : candidates) {
+    c.probability = verifier_ ? scorer_.probability(c.filter_probability, c.verification) : c.filter_probability;
+    c.accepted = c.verification.verified && c.probability >= params_.scoring.decision_probability;
+  }
+  rankCandidates(candidates, params_.candidates.min_probability);
+}
+
+void rankCandidates(std::vector<LoopCandidate>& candidates, double min_probability) {
+  // Best first by the published probability (the filter's order among equals), at least
+  // detector/min_probability.
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const LoopCandidate& a, const LoopCandidate& b) { return a.probability > b.probability; });
+  candidates.erase(std::remove_if(candidates.begin(), candidates.end(),
+                                  [&](const LoopCandidate& c) { return c.probability < min_probability; }),
+                   candidates.end());
+}
+
 std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<double>& belief,
-                                                          const std::vector<double>& similarity) const {
+                                                          const std::vector<double>& similarity,
+                                                          const LoopDetector& map) const {
   const CandidateParams& p = params_.candidates;
   std::vector<KeyframeIndex> order(belief.size());
   for (KeyframeIndex j = 0; j < order.size(); ++j) order[j] = j;
@@ -377,9 +394,9 @@ std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<doub
     if (suppressed) continue;
     LoopCandidate c;
     c.index = j;
-    c.id = records_[j].id;
-    c.session = records_[j].session;
-    c.stamp = records_[j].stamp;
+    c.id = map.records_[j].id;
+    c.session = map.records_[j].session;
+    c.stamp = map.records_[j].stamp;
     c.filter_probability = belief[j];
     c.probability = belief[j];
     c.similarity = similarity[j];

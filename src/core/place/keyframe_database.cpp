@@ -137,9 +137,13 @@ KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
     heads_.reserve(grown);
     tails_.reserve(grown * static_cast<size_t>(tail_words_));
   }
+  const size_t tail_words = static_cast<size_t>(tail_words_);
+  size_t at = tails_.size();
+  tails_.resize(at + descriptors.size() * tail_words);
+  uint64_t* tails = tails_.data();
   for (const Descriptor& d : descriptors) {
     heads_.push_back(d.words[0]);
-    tails_.insert(tails_.end(), d.words.begin() + 1, d.words.begin() + 1 + tail_words_);
+    for (size_t w = 0; w < tail_words; ++w) tails[at++] = d.words[1 + w];
   }
   index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
   keyframe_offsets_.push_back(static_cast<FeatureId>(total));

@@ -1,0 +1,64 @@
+#pragma once
+
+// Several robots, one map. Each robot's keyframes go into a LoopDetector of their own: its sessions,
+// temporal exclusion, near-past band and temporal filter are the robot's, so every robot's own loops
+// are found exactly as a lone detector finds them. Each keyframe is also looked up in every other
+// robot's map, through a temporal filter per ordered pair of robots (robot A's keyframes against
+// robot B's map): the filter's motion model needs neighbouring map entries to be neighbouring places
+// and its queries to be one robot's consecutive keyframes, which holds within a pair and would not
+// for the robots' keyframes interleaved in one map. Inter-robot candidates are verified, scored and
+// ranked as the robot's own; LoopCandidate::robot tells which map a candidate is in.
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "mild_lcd/detector/loop_detector.hpp"
+
+namespace mild {
+
+class RobotTeam {
+ public:
+  // Throws InvalidInput for invalid parameters, no robot, an empty name or a name given twice. One
+  // robot (any name) is a lone LoopDetector.
+  RobotTeam(const DetectorParams& params, std::vector<std::string> names);
+  // A team of one, around a detector that exists already (with what it has learnt).
+  explicit RobotTeam(std::unique_ptr<LoopDetector> robot, std::string name = "");
+
+  size_t size() const { return robots_.size(); }
+  const std::string& name(size_t robot) const { return names_.at(robot); }
+  std::optional<size_t> find(const std::string& name) const;
+  LoopDetector& robot(size_t robot) { return *robots_.at(robot); }
+  const LoopDetector& robot(size_t robot) const { return *robots_.at(robot); }
+  const DetectorParams& params() const { return robots_.front()->params(); }
+
+  // A keyframe of `robot`, as LoopDetector::process, with the other robots' candidates added:
+  // result.query_robot = robot, each candidate's robot its map's. Throws InvalidInput (changing
+  // nothing) for a robot out of range and whatever the robot's detector refuses.
+  DetectionResult process(size_t robot, Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
+  DetectionResult process(size_t robot, const cv::Mat& image, PixelFormat format, double stamp,
+                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {});
+
+  // After robot's map was replaced, reset or merged (a load, a reset): the pair filters that look
+  // at it or from it start over from "no loop", since their hypotheses were its old keyframes.
+  void mapChanged(size_t robot);
+  void reset();  // every robot's map and every filter
+  // LoopDetector::retune for every robot (all or nothing: the first refusal changes none).
+  void retune(const DetectorParams& next);
+  uint64_t retunes() const { return robots_.front()->retunes(); }
+
+  size_t keyframes() const;
+  size_t features() const;
+  size_t memoryBytes() const;
+
+ private:
+  void addOtherRobots(size_t robot, DetectionResult& result, const std::vector<float>& depths);
+  TemporalFilter& pairFilter(size_t from, size_t to) { return *pair_filters_[from * robots_.size() + to]; }
+
+  std::vector<std::string> names_;
+  std::vector<std::unique_ptr<LoopDetector>> robots_;
+  std::vector<std::unique_ptr<TemporalFilter>> pair_filters_;  // [from * size() + to], none for from == to
+};
+
+}  // namespace mild

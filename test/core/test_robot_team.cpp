@@ -1,0 +1,146 @@
+// Several robots, one map: two robots each mapping one half of the embedded sample at the same
+// time find the loops between their halves as one robot mapping the whole sample does; a team of
+// one is a lone LoopDetector.
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/robot_team.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+
+namespace mild {
+namespace {
+
+const std::string kSample = std::string(MILD_SOURCE_DIR) + "/sample/corridor";
+constexpr int kFrames = 300;
+constexpr int kHalf = 150;
+
+const std::vector<cv::Mat>& frames() {
+  static const std::vector<cv::Mat> images = [] {
+    std::vector<cv::Mat> out;
+    for (int i = 0; i < kFrames; ++i) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "/images/%06d.jpg", i);
+      out.push_back(cv::imread(kSample + name, cv::IMREAD_GRAYSCALE));
+    }
+    return out;
+  }();
+  return images;
+}
+
+// The ground truth's pairs from the second half to the first (the robots' shared places).
+GroundTruth acrossHalves() {
+  const GroundTruth all = loadGroundTruth(kSample + "/gt_loops.txt", kFrames);
+  GroundTruth truth;
+  for (const auto& p : all.right) {
+    if (p.first >= kHalf && p.second < kHalf) {
+      truth.right.insert(p);
+      truth.loop_queries.insert(p.first);
+    }
+  }
+  for (const auto& p : all.dont_care) {
+    if (p.first >= kHalf && p.second < kHalf) truth.dont_care.insert(p);
+  }
+  return truth;
+}
+
+TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
+  const GroundTruth truth = acrossHalves();
+  ASSERT_GT(truth.loop_queries.size(), 10u);
+
+  // One robot over the whole sample: its candidates from the second half into the first.
+  LoopDetector lone(DetectorParams{});
+  std::vector<ScoredPair> lone_pairs;
+  for (int i = 0; i < kFrames; ++i) {
+    const DetectionResult r = lone.process(frames()[i], PixelFormat::kGray, 0.1 * i, static_cast<uint64_t>(i));
+    for (const LoopCandidate& c : r.candidates) {
+      if (i >= kHalf && static_cast<int>(c.id) < kHalf)
+        lone_pairs.push_back({i, static_cast<int>(c.id), c.probability});
+    }
+  }
+
+  // Robot "a" maps frames 0..149 while robot "b" maps 150..299, one keyframe each in turn.
+  RobotTeam team(DetectorParams{}, {"a", "b"});
+  std::vector<ScoredPair> team_pairs;
+  size_t intra_b = 0, wrong_tags = 0;
+  for (int k = 0; k < kHalf; ++k) {
+    const DetectionResult ra = team.process(0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+    EXPECT_EQ(ra.query_robot, 0u);
+    const int j = kHalf + k;
+    const DetectionResult rb = team.process(1, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
+    EXPECT_EQ(rb.query_robot, 1u);
+    for (const LoopCandidate& c : ra.candidates) wrong_tags += (c.robot == 0) != (c.id < kHalf);
+    for (const LoopCandidate& c : rb.candidates) {
+      wrong_tags += (c.robot == 0) != (c.id < kHalf);
+      if (c.robot == 0) {
+        team_pairs.push_back({j, static_cast<int>(c.id), c.probability});
+      } else {
+        ++intra_b;
+      }
+    }
+  }
+  EXPECT_EQ(wrong_tags, 0u) << "a candidate named the wrong robot's map";
+  EXPECT_EQ(team.robot(0).size(), static_cast<size_t>(kHalf));
+  EXPECT_EQ(team.robot(1).size(), static_cast<size_t>(kHalf));
+  EXPECT_EQ(team.keyframes(), static_cast<size_t>(kFrames));
+
+  const Metrics lone_m = evaluate(truth, lone_pairs, 40);
+  const Metrics team_m = evaluate(truth, team_pairs, 40);
+  RecordProperty("lone_recall_at_100p", std::to_string(lone_m.recall_at_100_precision));
+  RecordProperty("team_recall_at_100p", std::to_string(team_m.recall_at_100_precision));
+  RecordProperty("team_average_precision", std::to_string(team_m.average_precision));
+  std::cout << "inter-robot recall@100%P " << team_m.recall_at_100_precision
+            << " (one robot: " << lone_m.recall_at_100_precision << "), AP " << team_m.average_precision << " ("
+            << lone_m.average_precision << "); robot b's own candidates " << intra_b << "\n";
+  EXPECT_GE(team_m.recall_at_100_precision, 0.8);
+  EXPECT_GE(team_m.recall_at_100_precision, lone_m.recall_at_100_precision - 0.02);
+}
+
+TEST(RobotTeam, ATeamOfOneIsALoneDetector) {
+  LoopDetector lone(DetectorParams{});
+  RobotTeam team(DetectorParams{}, {"solo"});
+  for (int i = 0; i < 120; i += 2) {
+    const DetectionResult a = lone.process(frames()[i], PixelFormat::kGray, 0.1 * i);
+    const DetectionResult b = team.process(0, frames()[i], PixelFormat::kGray, 0.1 * i);
+    ASSERT_EQ(a.similarity, b.similarity) << i;
+    ASSERT_EQ(a.candidates.size(), b.candidates.size()) << i;
+    for (size_t c = 0; c < a.candidates.size(); ++c) {
+      EXPECT_EQ(a.candidates[c].id, b.candidates[c].id);
+      EXPECT_EQ(a.candidates[c].probability, b.candidates[c].probability);
+      EXPECT_EQ(b.candidates[c].robot, 0u);
+    }
+  }
+}
+
+TEST(RobotTeam, RefusesBadRobotsAndKeepsEveryMapAsItWas) {
+  EXPECT_THROW(RobotTeam(DetectorParams{}, {}), InvalidInput);
+  EXPECT_THROW(RobotTeam(DetectorParams{}, {"a", "a"}), InvalidInput);
+  EXPECT_THROW(RobotTeam(DetectorParams{}, {"a", ""}), InvalidInput);
+  RobotTeam team(DetectorParams{}, {"a", "b"});
+  EXPECT_EQ(team.find("b"), std::optional<size_t>(1));
+  EXPECT_EQ(team.find("c"), std::nullopt);
+  team.process(0, frames()[0], PixelFormat::kGray, 0.0);
+  EXPECT_THROW(team.process(2, frames()[1], PixelFormat::kGray, 0.1), InvalidInput);
+  EXPECT_THROW(team.process(1, cv::Mat(), PixelFormat::kGray, 0.1), InvalidInput);  // the robot refuses it
+  EXPECT_EQ(team.keyframes(), 1u);
+  // Retuning reaches every robot, and a refused retune changes none.
+  DetectorParams next = team.params();
+  next.candidates.max_candidates = 1;
+  team.retune(next);
+  EXPECT_EQ(team.robot(1).params().candidates.max_candidates, 1);
+  next.database.index.num_tables = 20;
+  EXPECT_THROW(team.retune(next), InvalidInput);
+  EXPECT_EQ(team.robot(0).params().database.index.num_tables, 0);
+  EXPECT_EQ(team.robot(1).params().database.index.num_tables, 0);
+  team.reset();
+  EXPECT_EQ(team.keyframes(), 0u);
+}
+
+}  // namespace
+}  // namespace mild
