@@ -30,13 +30,15 @@
 #include "common/image_sequence.hpp"
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
 
 namespace fs = std::filesystem;
 using json = nlohmann::json;
-using Clock = std::chrono::steady_clock;
+using mild::Clock;
+using mild::msSince;
 
 namespace {
 
@@ -57,10 +59,6 @@ struct Options {
   bool inline_prefixes = true;
   bool json = false;
 };
-
-double msSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 std::vector<size_t> parseSizes(const std::string& text) {
   std::vector<size_t> out;

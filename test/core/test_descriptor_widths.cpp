@@ -14,25 +14,16 @@
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "random_descriptors.hpp"
+#include "test_images.hpp"
 
 namespace fs = std::filesystem;
 
 namespace mild {
 namespace {
 
-const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+const std::string& kFixture = test::kFixtureDir;
 
-const std::vector<cv::Mat>& fixtureFrames() {
-  static const std::vector<cv::Mat> frames = [] {
-    std::vector<std::string> files;
-    for (const auto& e : fs::directory_iterator(kFixture + "/images")) files.push_back(e.path().string());
-    std::sort(files.begin(), files.end());
-    std::vector<cv::Mat> out;
-    for (const auto& f : files) out.push_back(cv::imread(f, cv::IMREAD_GRAYSCALE));
-    return out;
-  }();
-  return frames;
-}
+using test::fixtureFrames;
 
 DetectorParams paramsFor(const std::string& type) {
   DetectorParams p;

@@ -12,22 +12,16 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "test_images.hpp"
 
 namespace fs = std::filesystem;
 
 namespace mild {
 namespace {
 
-const std::string kFixture = std::string(MILD_SOURCE_DIR) + "/test/data/corridor_stride5";
+const std::string& kFixture = test::kFixtureDir;
 
-std::vector<cv::Mat> fixtureFrames() {
-  std::vector<std::string> files;
-  for (const auto& e : fs::directory_iterator(kFixture + "/images")) files.push_back(e.path().string());
-  std::sort(files.begin(), files.end());
-  std::vector<cv::Mat> frames;
-  for (const auto& f : files) frames.push_back(cv::imread(f, cv::IMREAD_GRAYSCALE));
-  return frames;
-}
+using test::fixtureFrames;
 
 DetectorParams fixtureParams() {
   DetectorParams p;

@@ -13,26 +13,16 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "test_images.hpp"
 
 namespace mild {
 namespace {
 
-const std::string kSample = std::string(MILD_SOURCE_DIR) + "/sample/corridor";
+const std::string& kSample = test::kSampleDir;
 constexpr int kFrames = 300;
 constexpr int kHalf = 150;
 
-const std::vector<cv::Mat>& frames() {
-  static const std::vector<cv::Mat> images = [] {
-    std::vector<cv::Mat> out;
-    for (int i = 0; i < kFrames; ++i) {
-      char name[32];
-      std::snprintf(name, sizeof(name), "/images/%06d.jpg", i);
-      out.push_back(cv::imread(kSample + name, cv::IMREAD_GRAYSCALE));
-    }
-    return out;
-  }();
-  return images;
-}
+const std::vector<cv::Mat>& frames() { return test::sampleFrames(); }
 
 // The ground truth's pairs from the second half to the first (the robots' shared places).
 GroundTruth acrossHalves() {

@@ -17,27 +17,17 @@
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "test_images.hpp"
 
 namespace fs = std::filesystem;
 
 namespace mild {
 namespace {
 
-const std::string kSample = std::string(MILD_SOURCE_DIR) + "/sample/corridor";
+const std::string& kSample = test::kSampleDir;
 constexpr int kFrames = 300;
 
-const std::vector<cv::Mat>& frames() {
-  static const std::vector<cv::Mat> images = [] {
-    std::vector<cv::Mat> out;
-    for (int i = 0; i < kFrames; ++i) {
-      char name[32];
-      std::snprintf(name, sizeof(name), "/images/%06d.jpg", i);
-      out.push_back(cv::imread(kSample + name, cv::IMREAD_GRAYSCALE));
-    }
-    return out;
-  }();
-  return images;
-}
+const std::vector<cv::Mat>& frames() { return test::sampleFrames(); }
 
 // Frames [first, last) with ids = frame numbers, stamps at 10 Hz; candidates appended as scored pairs.
 void run(LoopDetector& d, int first, int last, std::vector<ScoredPair>& out,

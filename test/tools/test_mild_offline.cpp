@@ -75,6 +75,28 @@ TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
   }
 }
 
+// 512-bit descriptors end to end through the offline runner: BRISK features, a database of their
+// width, the fixture's loop found; --print-config says what ran.
+TEST_F(MildOffline, RunsWithBriskDescriptors) {
+  std::ofstream(path("brisk.yaml")) << readFile(kFixtureConfig) << "features: {type: brisk}\n";
+  const ProcessResult run =
+      mildOffline("--images " + kFixture + " --config " + path("brisk.yaml") + " --output " + path("c.csv") + " --gt " +
+                  kFixture + "/gt_loops.txt --min-gap 8 --stats " + path("s.json") + " --print-config");
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_NE(run.output.find("  type: brisk\n"), std::string::npos) << run.output;
+  const size_t at = run.output.find("recall@100%P: ");
+  ASSERT_NE(at, std::string::npos) << run.output;
+  EXPECT_GE(std::stod(run.output.substr(at + 14)), 0.6) << run.output;
+  const auto stats = nlohmann::json::parse(readFile(path("s.json")));
+  EXPECT_GT(stats["features"].get<int>(), 1000);
+}
+
+TEST_F(MildOffline, PrintsTheParametersAsTheDefaultYaml) {
+  const ProcessResult run = mildOffline("--print-config");
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_EQ(run.output, readFile(std::string(MILD_SOURCE_DIR) + "/config/default.yaml"));
+}
+
 TEST_F(MildOffline, ReportsRelativePoseErrorsWithIntrinsics) {
   // The fixture's exclusion plus the bench camera: verified true loops carry a relative pose.
   std::ofstream(path("camera.yaml")) << readFile(kFixtureConfig)

@@ -22,7 +22,7 @@ struct AkazeParams {
     v("num_features", p.num_features, Bounds::atLeast(1), "Upper bound on AKAZE features per keyframe.");
     v("threshold", p.threshold, Bounds::between(0, 1),
       "Detector response threshold. OpenCV's default 0.001 keeps ~30 features on the bench's 320 x 240 frames, "
-      "0.0001 ~180.");
+      "0.0001 180 to 270.");
     v("octaves", p.octaves, Bounds::in(1, 8), "Scale-space octaves.");
     v("octave_layers", p.octave_layers, Bounds::in(1, 8), "Sub-levels per octave.");
   }

@@ -6,18 +6,10 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/params/parameters.hpp"
 
 namespace mild {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-}  // namespace
 
 DatabaseParams DetectorParams::databaseParams() const {
   DatabaseParams p = database;

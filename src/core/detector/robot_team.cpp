@@ -4,17 +4,9 @@
 #include <set>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/common/stopwatch.hpp"
 
 namespace mild {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-}  // namespace
 
 RobotTeam::RobotTeam(const DetectorParams& params, std::vector<std::string> names) : names_(std::move(names)) {
   if (names_.empty()) throw InvalidInput("a robot team needs at least one robot");
