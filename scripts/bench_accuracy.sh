@@ -69,7 +69,7 @@ export CONFIG_ARGS="${config[*]}"
 printf '%s\n' "${sequences[@]}" | xargs -P "$JOBS" -I{} bash -c 'config=($CONFIG_ARGS); run_one "$@"' _ {}
 
 /usr/bin/python3 - "$OUT" "$BENCH" "${sequences[@]}" <<'EOF'
-import json, subprocess, sys
+import json, os, subprocess, sys
 out, bench, specs = sys.argv[1], sys.argv[2], sys.argv[3:]
 peers = {  # PEERS.md: recall@100%P / AP of the original MILD (loop probability) and iBoW-LCD
     "pub_corridor": ("0.145 / 0.940", "0.662 / 0.868"), "pub_city": ("0.019 / 0.927", "0.411 / 0.884"),
@@ -80,7 +80,7 @@ print("|---|---|---|---|---|---|---|---|---|")
 for spec in specs:
     name, folder = spec.split("=", 1)
     gt = f"{folder}/gt_loops.txt"
-    m = json.loads(subprocess.run([f"{out}/../devel/lib/mild_lcd/mild_score", gt, f"{out}/{name}.csv", "--json"],
+    m = json.loads(subprocess.run([f"{os.environ['BIN']}/mild_score", gt, f"{out}/{name}.csv", "--json"],
                                   capture_output=True, text=True, check=True).stdout)
     stats = json.load(open(f"{out}/{name}.json"))
     mild, ibow = peers.get(name, ("-", "-"))

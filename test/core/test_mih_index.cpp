@@ -144,6 +144,36 @@ TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
   EXPECT_EQ(index.discardedBuckets(), 0u);
 }
 
+// Two neighbouring buckets (substring values 2j and 2j + 1 in every table) both over the bound in
+// the same merge: each keeps its own newest entries (a merge once shifted the second bucket's
+// evicted entries into the first one's run).
+TEST(MihIndex, NeighbouringBucketsOverTheBoundEachKeepTheirOwnNewest) {
+  std::mt19937_64 rng(21);
+  for (bool inline_prefixes : {false, true}) {
+    MihParams p = uncapped(16, 0);
+    p.max_bucket_entries = 3;
+    p.inline_prefixes = inline_prefixes;
+    MihIndex index(p, kOrbBits);
+    Descriptor a = test::randomDescriptor(rng);
+    for (int t = 0; t < 16; ++t) {
+      if (a.bit(16 * t)) a.flip(16 * t);  // every substring even ...
+    }
+    Descriptor b = a;
+    for (int t = 0; t < 16; ++t) b.flip(16 * t);  // ... and b's the next bucket in every table
+    for (FeatureId round = 0; round < 3; ++round) {
+      for (FeatureId k = 5u * round; k < 5u * round + 5u; ++k) {
+        const DescriptorList pair = {a, b};
+        index.insertKeyframe(pair.data(), 2, 2 * k);  // a is feature 2k, b 2k + 1
+      }
+      index.deferMerges(false);  // merge now
+      const FeatureId last = 5 * round + 4;
+      EXPECT_EQ(visited(index, a), (std::set<FeatureId>{2 * last - 4, 2 * last - 2, 2 * last})) << round;
+      EXPECT_EQ(visited(index, b), (std::set<FeatureId>{2 * last - 3, 2 * last - 1, 2 * last + 1})) << round;
+    }
+    EXPECT_EQ(index.entryCount(), 16u * 6u);
+  }
+}
+
 TEST(MihIndex, IgnoresIdsAtOrBeyondTheLimit) {
   std::mt19937_64 rng(5);
   MihIndex index(uncapped(16, 0), kOrbBits);

@@ -36,11 +36,14 @@ TEST(MildBenchScale, ReportsEveryColumnPerSize) {
   for (const auto& row : out["rows"]) {
     for (const char* key : {"keyframes", "mih_ms_median", "mih_et_ms_median", "baseline_2017_ms_median",
                             "brute_ms_median", "bytes_per_feature", "mih_bounded_ms_median", "default_ms_median",
-                            "faiss_multihash_ms_median", "mih_inline_ms_median", "inline_bytes_per_feature"}) {
+                            "faiss_multihash_ms_median", "mih_inline_ms_median", "inline_bytes_per_feature",
+                            "default_bytes_per_feature", "insert_ms_last_tenth", "insert_ms_max"}) {
       ASSERT_TRUE(row.contains(key)) << key << " in " << row.dump();
     }
     EXPECT_GT(row["bytes_per_feature"].get<double>(), 32.0) << "at least the descriptor";
-    EXPECT_EQ(row["default_ms_median"], row["mih_et_ms_median"]) << "the shipped configuration";
+    EXPECT_EQ(row["default_ms_median"], row["mih_bounded_ms_median"]) << "the shipped configuration is bounded";
+    EXPECT_GT(row["bound"].get<int>(), 0) << "the shipped bound (index/max_bucket_entries)";
+    EXPECT_LE(row["insert_ms_last_tenth"].get<double>(), row["insert_ms_max"].get<double>());
     EXPECT_GT(row["inline_bytes_per_feature"].get<double>(), row["bytes_per_feature"].get<double>());
     // faiss answers the database's question on the same descriptors: pairs within d0, MIH a subset.
     ASSERT_TRUE(row["faiss_mih_ms_median"].is_number()) << row.dump();

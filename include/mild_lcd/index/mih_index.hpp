@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "mild_lcd/common/types.hpp"
+#include "mild_lcd/common/uninitialized_vector.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/substring_layout.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
@@ -19,7 +20,7 @@ struct MihParams {
   double bucket_cap_factor = 50.0;
   uint64_t expected_features = 1000000;
   uint32_t min_bucket_cap = 64;
-  uint32_t max_bucket_entries = 0;
+  uint32_t max_bucket_entries = 256;
   bool inline_prefixes = false;
 
   static constexpr int kMaxRadius = 3;
@@ -40,10 +41,10 @@ struct MihParams {
     v("expected_features", p.expected_features, Bounds::atLeast(0), "N before the map holds that many features.");
     v("min_bucket_cap", p.min_bucket_cap, Bounds::atLeast(1), "The cap never goes below this.");
     v("max_bucket_entries", p.max_bucket_entries, Bounds::atLeast(2).orZero(),
-      "Bounded query time for very large maps (0 = off): a bucket keeps only its newest max_bucket_entries "
-      "entries, so a query reads at most about m * max_bucket_entries ids per feature however large the map "
-      "grows; old places stay findable through their rare substrings. README \"Beyond linear growth\" measures "
-      "its cost in recall.");
+      "Bounded query time for large maps (0 = off): a bucket keeps only its newest max_bucket_entries entries, "
+      "so a query reads at most about m * max_bucket_entries ids per feature however large the map grows; old "
+      "places stay findable through their rare substrings. A bucket at the bound is trimmed instead of discarded "
+      "by the cap above. README \"Beyond linear growth\" measures recall and time with and without it.");
     v("inline_prefixes", p.inline_prefixes, Bounds::any(),
       "Each index entry also holds its feature's first 64 bits, so that early termination reads each bucket "
       "sequentially instead of one random read per candidate: the same results, 8 bytes more per entry (about 128 "
@@ -73,7 +74,9 @@ struct ProbeCounters {
 // probe reads a bucket's ids in one sequential run; entries added since the last merge sit in
 // per-bucket chains. When the chains of a table hold more than 1/64 of its settled entries they
 // are merged into the array: each entry is copied a bounded number of times over its life, and
-// no bucket carries the spare capacity (or the 24-byte header) of a vector of its own.
+// no bucket carries the spare capacity (or the 24-byte header) of a vector of its own. A merge
+// shifts the runs within the array (which keeps an eighth of spare room), so that it neither
+// allocates nor clears a new array of every entry (README "Insert time" measures it).
 class MihIndex {
  public:
   // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit
@@ -129,11 +132,13 @@ class MihIndex {
     uint32_t slot;    // its bucket, so that merging needs no walk along the chains
     uint64_t prefix;  // the feature's first 64 bits (inline_prefixes)
   };
-  // A bucket, in one place: its settled run starts at `offset` and ends where the next slot's
-  // starts; `recent` is its newest recent link, kNone, or kDiscarded; `count` its entries, settled
-  // and recent (for the cap).
+  // A bucket, in one place: its settled run is [offset, end); `recent` is its newest recent link,
+  // kNone, or kDiscarded; `count` its entries, settled and recent (for the cap). The run keeps an
+  // end of its own, rather than ending where the next slot's starts, because with bounded buckets a
+  // run's oldest entries give way by moving its start: the run before must not grow into them.
   struct Slot {
     uint32_t offset;
+    uint32_t end;
     uint32_t recent;
     uint32_t count;
   };
@@ -141,10 +146,11 @@ class MihIndex {
     bool dense = true;
     std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
     std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
-    std::vector<FeatureId> ids;                      // settled entries, bucket after bucket
-    std::vector<uint64_t> prefixes;                  // beside ids (inline_prefixes), else empty
+    UninitializedVector<FeatureId> ids;              // settled entries, bucket after bucket
+    UninitializedVector<uint64_t> prefixes;          // beside ids (inline_prefixes), else empty
     std::vector<Link> recent;
     size_t entries = 0;
+    uint32_t stagger = 0;  // spreads the tables' merges over different keyframes (mergeThreshold)
 
     uint32_t find(uint64_t key) const;
     uint32_t findOrAdd(uint64_t key);
@@ -177,6 +183,12 @@ class MihIndex {
   std::vector<uint64_t> keys_;  // the keyframe's substrings for the table at hand
   uint32_t seen_generation_ = 0;
   bool firstInKeyframe(uint64_t key);
+  // merge()'s per-bucket counts, kept between merges: allocated anew, five arrays of 65,536 counts
+  // were faulted in (and zeroed) for every merge, a fifth of the insert time of a small map.
+  struct MergeScratch {
+    std::vector<uint32_t> start, recent_in, from, kept, skip_recent;
+  };
+  MergeScratch merge_scratch_;
 };
 
 template <class Visit>
@@ -212,7 +224,7 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
       const Table& table = *batch[i].table;
       const Slot& s = table.slots[batch[i].slot];
       if (s.recent == kDiscarded) continue;
-      const uint32_t begin = s.offset, end = table.slots[batch[i].slot + 1].offset;
+      const uint32_t begin = s.offset, end = s.end;
       const FeatureId* ids = table.ids.data();
       for (uint32_t e = begin; e != end && ids[e] < id_limit; ++e) {  // settled ids ascend within a bucket
         ++counters.entries_visited;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
@@ -17,8 +18,10 @@ constexpr int kMaxDenseBits = 20;
 
 size_t MihIndex::mergeThreshold(const Table& table) {
   // Recent entries cost a dependent load each at query time; 1/64 of the settled ones keeps them
-  // rare while each entry is copied about 64 times over its life (a memmove, cheap).
-  return std::max<size_t>(4096, table.ids.size() / 64);
+  // rare while each entry is copied about 64 times over its life (a memmove, cheap). The tables
+  // grow alike, so with one threshold all of them merged in the same keyframe, which then paid
+  // for 16 merges at once: table t waits for (16 + t % 16) / 16 of it, and their merges drift apart.
+  return std::max<size_t>(4096, table.ids.size() / 64) * (16 + table.stagger) / 16;
 }
 
 uint32_t MihIndex::Table::find(uint64_t key) const {
@@ -30,7 +33,9 @@ uint32_t MihIndex::Table::find(uint64_t key) const {
 uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
   if (dense) return static_cast<uint32_t>(key);
   auto [it, added] = slot_of.emplace(key, static_cast<uint32_t>(slots.size() - 1));
-  if (added) slots.insert(slots.end() - 1, Slot{slots.back().offset, kNone, 0});  // before the end sentinel
+  if (added) {  // before the end sentinel, an empty run
+    slots.insert(slots.end() - 1, Slot{slots.back().offset, slots.back().offset, kNone, 0});
+  }
   return it->second;
 }
 
@@ -44,9 +49,10 @@ void MihIndex::clear() {
   tables_.assign(layout_.count(), Table{});
   for (int t = 0; t < layout_.count(); ++t) {
     Table& table = tables_[t];
+    table.stagger = static_cast<uint32_t>(t % 16);
     table.dense = layout_.length(t) <= kMaxDenseBits;
     const size_t slots = table.dense ? size_t{1} << layout_.length(t) : 0;
-    table.slots.assign(slots + 1, Slot{0, kNone, 0});
+    table.slots.assign(slots + 1, Slot{0, 0, kNone, 0});
   }
   entry_count_ = 0;
   discarded_buckets_ = 0;
@@ -105,8 +111,7 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
       }
       table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s, descriptors[i].words[0]});
       slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
-      if (params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries &&
-          slot.offset < table.slots[s + 1].offset) {
+      if (params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries && slot.offset < slot.end) {
         ++slot.offset;  // the oldest settled entry gives way (the merge drops recent ones over the bound)
         ++evicted_entries_;
         continue;
@@ -131,24 +136,55 @@ void MihIndex::deferMerges(bool defer) {
   }
 }
 
+namespace {
+
+// Moves every bucket's kept settled run from[s] (length kept[s]) to start[s] within `array`, in
+// place. Runs keep their order, so runs moving left are moved first to last and runs moving right
+// last to first: neither overwrites a run that has yet to move.
+template <class T>
+void shiftRuns(T* array, const std::vector<uint32_t>& from, const std::vector<uint32_t>& kept,
+               const std::vector<uint32_t>& start) {
+  const size_t slots = kept.size();
+  for (size_t s = 0; s < slots; ++s) {
+    if (kept[s] > 0 && start[s] < from[s]) std::memmove(array + start[s], array + from[s], kept[s] * sizeof(T));
+  }
+  for (size_t s = slots; s-- > 0;) {
+    if (kept[s] > 0 && start[s] > from[s]) std::memmove(array + start[s], array + from[s], kept[s] * sizeof(T));
+  }
+}
+
+}  // namespace
+
 void MihIndex::merge(Table& table) {
   // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
   // ids, so scattering them in that order keeps every bucket's ids ascending.
   const size_t slots = slotCount(table);
   const uint32_t bound = params_.max_bucket_entries;
-  std::vector<uint32_t> start(slots + 1, 0), recent_in(slots, 0);
+  MergeScratch& scratch = merge_scratch_;
+  std::vector<uint32_t>& start = scratch.start;
+  std::vector<uint32_t>& recent_in = scratch.recent_in;
+  start.resize(slots + 1);
+  start[0] = 0;
+  recent_in.assign(slots, 0);
   for (const Link& link : table.recent) {
     if (table.slots[link.slot].recent != kDiscarded) ++recent_in[link.slot];
   }
-  // Over the bound (max_bucket_entries), a bucket's oldest entries go: settled ones first.
-  std::vector<uint32_t> skip_recent(bound > 0 ? slots : 0, 0);
+  // Each bucket's settled entries that stay: from[s] .. from[s] + kept[s] in the array. Over the
+  // bound (max_bucket_entries) a bucket's oldest entries go, settled ones first.
+  std::vector<uint32_t>& from = scratch.from;
+  std::vector<uint32_t>& kept = scratch.kept;
+  std::vector<uint32_t>& skip_recent = scratch.skip_recent;
+  from.resize(slots);  // every element is written below
+  kept.resize(slots);
+  skip_recent.assign(bound > 0 ? slots : 0, 0);
   for (size_t s = 0; s < slots; ++s) {
-    Slot& slot = table.slots[s];
-    uint32_t settled = slot.recent == kDiscarded ? 0 : table.slots[s + 1].offset - slot.offset;
+    const Slot& slot = table.slots[s];
+    uint32_t settled = slot.recent == kDiscarded ? 0 : slot.end - slot.offset;
+    from[s] = slot.offset;
     if (bound > 0 && settled + recent_in[s] > bound) {
       uint32_t excess = settled + recent_in[s] - bound;
       const uint32_t from_settled = std::min(excess, settled);
-      slot.offset += from_settled;
+      from[s] += from_settled;
       settled -= from_settled;
       excess -= from_settled;
       skip_recent[s] = excess;
@@ -156,26 +192,40 @@ void MihIndex::merge(Table& table) {
       table.entries -= from_settled + excess;
       entry_count_ -= from_settled + excess;
     }
+    kept[s] = settled;
     start[s + 1] = start[s] + settled + recent_in[s] - (bound > 0 ? skip_recent[s] : 0);
   }
+  const size_t total = start[slots];
   const bool prefixes = params_.inline_prefixes;
-  std::vector<FeatureId> ids(start[slots]);
-  std::vector<uint64_t> heads(prefixes ? start[slots] : 0);
-  for (size_t s = 0; s < slots; ++s) {  // settled runs first, then room for the recent ones
-    Slot& slot = table.slots[s];
-    if (slot.recent != kDiscarded) {
-      const FeatureId* run = table.ids.data() + slot.offset;
-      const uint32_t settled = table.slots[s + 1].offset - slot.offset;
-      std::copy(run, run + settled, ids.begin() + start[s]);
-      if (prefixes) {
-        const uint64_t* from = table.prefixes.data() + slot.offset;
-        std::copy(from, from + settled, heads.begin() + start[s]);
-      }
-      slot.offset = start[s] + settled;  // the write cursor for its recent entries, for now
-    } else {
-      slot.offset = start[s];
+  if (total > table.ids.capacity()) {
+    // Past the spare room: one new array with an eighth more, the runs copied into it once.
+    UninitializedVector<FeatureId> ids;
+    ids.reserve(total + total / 8);
+    ids.resize(total);
+    UninitializedVector<uint64_t> heads;
+    if (prefixes) {
+      heads.reserve(total + total / 8);
+      heads.resize(total);
     }
+    for (size_t s = 0; s < slots; ++s) {
+      std::copy(table.ids.data() + from[s], table.ids.data() + from[s] + kept[s], ids.data() + start[s]);
+      if (prefixes) {
+        std::copy(table.prefixes.data() + from[s], table.prefixes.data() + from[s] + kept[s], heads.data() + start[s]);
+      }
+    }
+    table.ids = std::move(ids);
+    table.prefixes = std::move(heads);
+  } else {
+    if (total > table.ids.size()) {
+      table.ids.resize(total);
+      if (prefixes) table.prefixes.resize(total);
+    }
+    shiftRuns(table.ids.data(), from, kept, start);
+    if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start);
+    table.ids.resize(total);  // shrinks after discards or evictions; the room stays
+    if (prefixes) table.prefixes.resize(total);
   }
+  for (size_t s = 0; s < slots; ++s) table.slots[s].offset = start[s] + kept[s];  // each bucket's write cursor
   for (const Link& link : table.recent) {
     Slot& slot = table.slots[link.slot];
     if (slot.recent == kDiscarded) continue;
@@ -183,20 +233,19 @@ void MihIndex::merge(Table& table) {
       --skip_recent[link.slot];
       continue;
     }
-    if (prefixes) heads[slot.offset] = link.prefix;
-    ids[slot.offset++] = link.id;
+    if (prefixes) table.prefixes[slot.offset] = link.prefix;
+    table.ids[slot.offset++] = link.id;
   }
   for (size_t s = 0; s < slots; ++s) {
     Slot& slot = table.slots[s];
     slot.offset = start[s];
+    slot.end = start[s + 1];
     if (slot.recent != kDiscarded) {
       slot.recent = kNone;
       slot.count = start[s + 1] - start[s];
     }
   }
-  table.slots[slots].offset = start[slots];
-  table.ids = std::move(ids);
-  table.prefixes = std::move(heads);
+  table.slots[slots].offset = table.slots[slots].end = start[slots];
   table.recent.clear();
   if (table.recent.capacity() > 2 * mergeThreshold(table)) {  // after a bulk load: give the room back
     std::vector<Link>().swap(table.recent);
@@ -209,6 +258,10 @@ bool MihIndex::meetsInTable(const Descriptor& a, const Descriptor& b, int t) con
 
 size_t MihIndex::memoryBytes() const {
   size_t bytes = sizeof(*this);
+  const MergeScratch& m = merge_scratch_;
+  bytes +=
+      (m.start.capacity() + m.recent_in.capacity() + m.from.capacity() + m.kept.capacity() + m.skip_recent.capacity()) *
+      sizeof(uint32_t);
   for (const Table& table : tables_) {
     bytes += sizeof(Table) + table.slots.capacity() * sizeof(Slot) + table.ids.capacity() * sizeof(FeatureId) +
              table.prefixes.capacity() * sizeof(uint64_t) + table.recent.capacity() * sizeof(Link);
