@@ -184,7 +184,7 @@ class MihIndex {
   uint32_t seen_generation_ = 0;
   bool firstInKeyframe(uint64_t key);
   // merge()'s per-bucket counts, kept between merges: allocated anew, five arrays of 65,536 counts
-  // were faulted in (and zeroed) for every merge, a fifth of the insert time of a small map.
+  // were faulted in (and zeroed) for every merge (README "Insert time" measures the difference).
   struct MergeScratch {
     std::vector<uint32_t> start, recent_in, from, kept, skip_recent;
   };
