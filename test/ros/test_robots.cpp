@@ -83,9 +83,8 @@ TEST(Robots, TwoRobotsReplayingAtOnceFindTheirSharedPlaces) {
   std::map<int, size_t> processed_at;
   for (const auto& msg : all.messages()) processed_at.emplace(static_cast<int>(msg.query_id), processed_at.size());
   const auto findable = [&](const std::pair<int, int>& p) {
-    return p.first >= static_cast<int>(kHalf) && p.second < static_cast<int>(kHalf) &&
-           processed_at.count(p.first) && processed_at.count(p.second) &&
-           processed_at.at(p.second) < processed_at.at(p.first);
+    return p.first >= static_cast<int>(kHalf) && p.second < static_cast<int>(kHalf) && processed_at.count(p.first) &&
+           processed_at.count(p.second) && processed_at.at(p.second) < processed_at.at(p.first);
   };
   const mild::GroundTruth all_truth = mild::loadGroundTruth(kSampleDir + "/gt_loops.txt");
   mild::GroundTruth truth;
@@ -112,8 +111,8 @@ TEST(Robots, TwoRobotsReplayingAtOnceFindTheirSharedPlaces) {
       best_wrong = std::to_string(p.query) + " -> " + std::to_string(p.candidate) + " at " + std::to_string(p.score);
     }
   }
-  EXPECT_GE(m.recall_at_100_precision, 0.8) << "inter-robot loops of robot2 into robot1's map; highest wrong: "
-                                            << best_wrong;
+  EXPECT_GE(m.recall_at_100_precision, 0.8)
+      << "inter-robot loops of robot2 into robot1's map; highest wrong: " << best_wrong;
 
   // Nothing was dropped silently: every keyframe is counted as processed.
   const auto values = diagnostics("processed keyframes", 10.0);
