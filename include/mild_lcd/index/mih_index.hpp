@@ -5,8 +5,8 @@
 #include <unordered_map>
 #include <vector>
 
+#include "mild_lcd/common/mapped_array.hpp"
 #include "mild_lcd/common/types.hpp"
-#include "mild_lcd/common/uninitialized_vector.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/substring_layout.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
@@ -146,8 +146,8 @@ class MihIndex {
     bool dense = true;
     std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
     std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
-    UninitializedVector<FeatureId> ids;              // settled entries, bucket after bucket
-    UninitializedVector<uint64_t> prefixes;          // beside ids (inline_prefixes), else empty
+    MappedArray<FeatureId> ids;                      // settled entries, bucket after bucket
+    MappedArray<uint64_t> prefixes;                  // beside ids (inline_prefixes), else empty
     std::vector<Link> recent;
     size_t entries = 0;
     uint32_t stagger = 0;  // spreads the tables' merges over different keyframes (mergeThreshold)

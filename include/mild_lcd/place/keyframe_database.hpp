@@ -6,8 +6,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "mild_lcd/common/mapped_array.hpp"
 #include "mild_lcd/common/types.hpp"
-#include "mild_lcd/common/uninitialized_vector.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/mih_index.hpp"
 #include "mild_lcd/place/similarity.hpp"
@@ -141,8 +141,8 @@ class KeyframeDatabase {
   PhiTable phi_;
   MihIndex index_;
   int tail_words_ = 0;                       // words after the first, per feature
-  UninitializedVector<uint64_t> heads_;      // first 64 bits of every feature
-  UninitializedVector<uint64_t> tails_;      // the other words, tail_words_ per feature
+  MappedArray<uint64_t> heads_;              // first 64 bits of every feature
+  MappedArray<uint64_t> tails_;              // the other words, tail_words_ per feature
   std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
 };
 

@@ -198,33 +198,19 @@ void MihIndex::merge(Table& table) {
   const size_t total = start[slots];
   const bool prefixes = params_.inline_prefixes;
   if (total > table.ids.capacity()) {
-    // Past the spare room: one new array with an eighth more, the runs copied into it once.
-    UninitializedVector<FeatureId> ids;
-    ids.reserve(total + total / 8);
-    ids.resize(total);
-    UninitializedVector<uint64_t> heads;
-    if (prefixes) {
-      heads.reserve(total + total / 8);
-      heads.resize(total);
-    }
-    for (size_t s = 0; s < slots; ++s) {
-      std::copy(table.ids.data() + from[s], table.ids.data() + from[s] + kept[s], ids.data() + start[s]);
-      if (prefixes) {
-        std::copy(table.prefixes.data() + from[s], table.prefixes.data() + from[s] + kept[s], heads.data() + start[s]);
-      }
-    }
-    table.ids = std::move(ids);
-    table.prefixes = std::move(heads);
-  } else {
-    if (total > table.ids.size()) {
-      table.ids.resize(total);
-      if (prefixes) table.prefixes.resize(total);
-    }
-    shiftRuns(table.ids.data(), from, kept, start);
-    if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start);
-    table.ids.resize(total);  // shrinks after discards or evictions; the room stays
+    // Past the spare room: the array grows by an eighth more in place (the mapping is extended, not
+    // copied), and the runs move within it as below.
+    table.ids.reserve(total + total / 8);
+    if (prefixes) table.prefixes.reserve(total + total / 8);
+  }
+  if (total > table.ids.size()) {
+    table.ids.resize(total);
     if (prefixes) table.prefixes.resize(total);
   }
+  shiftRuns(table.ids.data(), from, kept, start);
+  if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start);
+  table.ids.resize(total);  // shrinks after discards or evictions; the room stays
+  if (prefixes) table.prefixes.resize(total);
   for (size_t s = 0; s < slots; ++s) table.slots[s].offset = start[s] + kept[s];  // each bucket's write cursor
   for (const Link& link : table.recent) {
     Slot& slot = table.slots[link.slot];

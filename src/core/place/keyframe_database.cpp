@@ -113,8 +113,8 @@ void KeyframeDatabase::setSimilarityParams(const SimilarityParams& params) {
 
 void KeyframeDatabase::clear() {
   index_.clear();
-  heads_.clear();
-  tails_.clear();
+  heads_.release();
+  tails_.release();
   keyframe_offsets_.assign(1, 0);
 }
 
