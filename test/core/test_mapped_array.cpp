@@ -1,6 +1,6 @@
 // The array the map's descriptors and index ids live in: contents survive growth by remapping (also
-// across the huge-page line, past which it is 2 MB-aligned whole huge pages), copies are deep, moves leave the source
-// empty, clear() keeps the room and release() gives it back.
+// across the huge-page line, past which it is 2 MB-aligned whole huge pages), copies are deep, moves
+// leave the source empty, clear() keeps the room and release() gives it back.
 #include <gtest/gtest.h>
 
 #include <cstdint>

@@ -13,8 +13,8 @@ namespace mild {
 
 // A growable array of trivially copyable elements in its own anonymous memory mapping, for the
 // arrays that grow with the map (descriptor words, index ids). Growing past the capacity is
-// mremap(MREMAP_MAYMOVE): the kernel moves the page tables instead of copying the elements, and the
-// new part is faulted in page by page as it is written. A std::vector of a 50,000-keyframe map
+// mremap: the mapping is extended in place, or its page tables are moved to a larger range, never
+// its elements copied; the new part is faulted in as it is written. A std::vector of a 50,000-keyframe map
 // copies a gigabyte of descriptors and faults in its new block in one insert (a 2 s stall); here
 // growing costs microseconds however large the array. New elements are not initialised: resize()'s
 // caller writes every element it grows into. The mapping asks for transparent huge pages (advice

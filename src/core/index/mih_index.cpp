@@ -46,7 +46,8 @@ MihIndex::MihIndex(const MihParams& params, int bits)
 }
 
 void MihIndex::clear() {
-  tables_.assign(layout_.count(), Table{});
+  tables_.clear();  // destroyed, not assigned over: their arrays' memory goes back to the system
+  tables_.resize(layout_.count());
   for (int t = 0; t < layout_.count(); ++t) {
     Table& table = tables_[t];
     table.stagger = static_cast<uint32_t>(t % 16);
@@ -197,16 +198,11 @@ void MihIndex::merge(Table& table) {
   }
   const size_t total = start[slots];
   const bool prefixes = params_.inline_prefixes;
-  if (total > table.ids.capacity()) {
-    // Past the spare room: the array grows by an eighth more in place (the mapping is extended, not
-    // copied), and the runs move within it as below.
-    table.ids.reserve(total + total / 8);
-    if (prefixes) table.prefixes.reserve(total + total / 8);
-  }
-  if (total > table.ids.size()) {
-    table.ids.resize(total);
-    if (prefixes) table.prefixes.resize(total);
-  }
+  // Past the spare room an array grows by an eighth more (its mapping is extended, not copied), and
+  // the runs move within it as below. Each array on its own: their capacities are rounded to pages
+  // of different numbers of elements.
+  if (total > table.ids.capacity()) table.ids.reserve(total + total / 8);
+  if (prefixes && total > table.prefixes.capacity()) table.prefixes.reserve(total + total / 8);
   shiftRuns(table.ids.data(), from, kept, start);
   if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start);
   table.ids.resize(total);  // shrinks after discards or evictions; the room stays
