@@ -85,6 +85,7 @@ MeasuredPriors measureDistancePriors(const std::vector<FeaturePair>& overlapping
 double indexRecall(const std::vector<std::pair<Descriptor, Descriptor>>& correspondences, MihParams params) {
   if (correspondences.empty()) throw InvalidInput("no correspondences to look up");
   params.cap_buckets = false;  // every stored descriptor must stay findable
+  params.max_candidates_per_feature = 0;
   MihIndex index(params, correspondences.front().first.bits());
   const FeatureId n = static_cast<FeatureId>(correspondences.size());
   for (FeatureId k = 0; k < n; ++k) index.insertKeyframe(&correspondences[k].second, 1, k);

@@ -252,6 +252,34 @@ TEST(KeyframeDatabase, InlinePrefixesGiveIdenticalResults) {
   }
 }
 
+// A query budget larger than every bucket changes nothing; a small one caps the entries each query
+// feature reads, with or without inline prefixes, through merges and bounded buckets.
+TEST(KeyframeDatabase, QueryBudgetCapsEntriesReadPerFeature) {
+  for (bool inline_prefixes : {false, true}) {
+    std::mt19937_64 rng(47);
+    const Scene s = makeScene(rng, 200, 60);
+    DatabaseParams p = paramsWith(16, 0);
+    p.index.max_bucket_entries = 40;
+    p.index.inline_prefixes = inline_prefixes;
+    KeyframeDatabase reference(p);
+    p.index.max_candidates_per_feature = 1u << 30;
+    KeyframeDatabase ample(p);
+    p.index.max_candidates_per_feature = 20;
+    KeyframeDatabase tight(p);
+    for (size_t k = 0; k < s.keyframes.size(); ++k) {
+      reference.insert(s.keyframes[k]);
+      ample.insert(s.keyframes[k]);
+      tight.insert(s.keyframes[k]);
+      if (k % 25 != 24) continue;
+      const QueryResult a = reference.query(s.query), b = ample.query(s.query), c = tight.query(s.query);
+      EXPECT_EQ(a.similarity, b.similarity) << "after keyframe " << k;
+      EXPECT_EQ(a.stats.candidates_visited, b.stats.candidates_visited);
+      EXPECT_LE(c.stats.candidates_visited, 20u * c.stats.query_features);
+      EXPECT_LT(c.stats.candidates_visited, a.stats.candidates_visited) << "the budget of 20 never bit";
+    }
+  }
+}
+
 TEST(KeyframeDatabase, HoldsMoreThan65535KeyframesWithoutWrapAround) {
   std::mt19937_64 rng(51);
   DatabaseParams p;

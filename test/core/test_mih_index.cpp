@@ -17,6 +17,7 @@ MihParams uncapped(int m, int r) {
   p.num_tables = m;
   p.radius = r;
   p.cap_buckets = false;
+  p.max_candidates_per_feature = 0;  // the pigeonhole guarantee holds without the query budget
   return p;
 }
 
@@ -144,6 +145,75 @@ TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
   EXPECT_EQ(index.discardedBuckets(), 0u);
 }
 
+// A query budget reads the shortest buckets first and the newest entries of the last one it
+// reaches: a feature met in one rare bucket is found even when the common buckets alone would use
+// the budget many times over.
+TEST(MihIndex, QueryBudgetReadsShortestBucketsFirstAndNewestEntries) {
+  std::mt19937_64 rng(33);
+  for (bool inline_prefixes : {false, true}) {
+    MihParams p = uncapped(16, 0);
+    p.max_bucket_entries = 0;
+    p.max_candidates_per_feature = 50;
+    p.inline_prefixes = inline_prefixes;
+    MihIndex index(p, kOrbBits);
+    const Descriptor q = test::randomDescriptor(rng);
+    Descriptor rare = q;  // meets q in table 0 only
+    for (int t = 1; t < 16; ++t) rare.flip(16 * t);
+    Descriptor common = q;  // meets q in tables 1..15
+    common.flip(0);
+    index.insertKeyframe(&rare, 1, 0);
+    for (FeatureId k = 1; k <= 60; ++k) index.insertKeyframe(&common, 1, k);
+    index.deferMerges(false);  // 60 settled, the next 40 recent
+    for (FeatureId k = 61; k <= 100; ++k) index.insertKeyframe(&common, 1, k);
+
+    std::set<FeatureId> expected = {0};
+    for (FeatureId k = 52; k <= 100; ++k) expected.insert(k);  // the newest 49 of the common ones
+    ProbeCounters counters;
+    std::set<FeatureId> found;
+    if (inline_prefixes) {
+      index.probeWithPrefixes(q, kAllKeyframes, counters, [&](FeatureId id, uint64_t prefix) {
+        found.insert(id);
+        EXPECT_EQ(prefix, id == 0 ? rare.words[0] : common.words[0]);
+      });
+    } else {
+      index.probe(q, kAllKeyframes, counters, [&](FeatureId id, int) { found.insert(id); });
+    }
+    EXPECT_EQ(found, expected) << inline_prefixes;
+    EXPECT_EQ(counters.entries_visited, 50u);
+
+    // Entries at or past the limit neither count against the budget nor show.
+    std::set<FeatureId> below_limit = {0};
+    for (FeatureId k = 42; k <= 90; ++k) below_limit.insert(k);
+    EXPECT_EQ(visited(index, q, 91), below_limit) << inline_prefixes;
+
+    // Without the budget every entry of every bucket is read.
+    MihParams unlimited = p;
+    unlimited.max_candidates_per_feature = 0;
+    MihIndex all(unlimited, kOrbBits);
+    all.insertKeyframe(&rare, 1, 0);
+    for (FeatureId k = 1; k <= 100; ++k) all.insertKeyframe(&common, 1, k);
+    ProbeCounters all_counters;
+    all.probe(q, kAllKeyframes, all_counters, [](FeatureId, int) {});
+    EXPECT_EQ(all_counters.entries_visited, 1u + 15u * 100u);
+  }
+}
+
+// The budget is per 16 tables: BRISK's 32 tables read twice as many entries as ORB's 16.
+TEST(MihIndex, QueryBudgetScalesWithTheTableCount) {
+  std::mt19937_64 rng(34);
+  for (int bytes : {32, 64}) {
+    MihParams p = uncapped(0, 0);
+    p.max_bucket_entries = 0;
+    p.max_candidates_per_feature = 20;
+    MihIndex index(p, bytes * 8);
+    const Descriptor d = test::randomDescriptor(rng, bytes);
+    for (FeatureId k = 0; k < 100; ++k) index.insertKeyframe(&d, 1, k);
+    ProbeCounters counters;
+    index.probe(d, kAllKeyframes, counters, [](FeatureId, int) {});
+    EXPECT_EQ(counters.entries_visited, 20u * static_cast<uint64_t>(index.layout().count()) / 16u) << bytes;
+  }
+}
+
 // Two neighbouring buckets (substring values 2j and 2j + 1 in every table) both over the bound in
 // the same merge: each keeps its own newest entries (a merge once shifted the second bucket's
 // evicted entries into the first one's run).
@@ -188,7 +258,8 @@ TEST(MihIndex, WideDescriptorsGetSixteenBitTablesAndTheSameGuarantee) {
   std::mt19937_64 rng(12);
   MihParams p;
   p.cap_buckets = false;
-  ASSERT_EQ(p.num_tables, 0);  // automatic
+  p.max_candidates_per_feature = 0;  // the pigeonhole guarantee holds without the query budget
+  ASSERT_EQ(p.num_tables, 0);        // automatic
   MihIndex index(p, 512);
   ASSERT_EQ(index.layout().count(), 32);
   for (int t = 0; t < 32; ++t) EXPECT_EQ(index.layout().length(t), 16);

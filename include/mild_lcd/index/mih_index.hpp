@@ -1,5 +1,6 @@
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <unordered_map>
@@ -21,6 +22,7 @@ struct MihParams {
   uint64_t expected_features = 1000000;
   uint32_t min_bucket_cap = 64;
   uint32_t max_bucket_entries = 256;
+  uint32_t max_candidates_per_feature = 512;
   bool inline_prefixes = false;
 
   static constexpr int kMaxRadius = 3;
@@ -45,6 +47,12 @@ struct MihParams {
       "so a query reads at most about m * max_bucket_entries ids per feature however large the map grows; old "
       "places stay findable through their rare substrings. A bucket at the bound is trimmed instead of discarded "
       "by the cap above. README \"Beyond linear growth\" measures recall and time with and without it.");
+    v("max_candidates_per_feature", p.max_candidates_per_feature, Bounds::atLeast(1).orZero(),
+      "Query budget (0 = off): a query feature reads its buckets shortest first, and stops after this many "
+      "entries per 16 tables (scaled by m / 16: 1,024 for BRISK's 32 tables); the last bucket it reaches "
+      "contributes its newest entries. Distinctive substrings, which identify old places, are read whole; the cost "
+      "per query feature stops growing with the map once its common buckets fill. README \"Query budget\" "
+      "measures recall and time.");
     v("inline_prefixes", p.inline_prefixes, Bounds::any(),
       "Each index entry also holds its feature's first 64 bits, so that early termination reads each bucket "
       "sequentially instead of one random read per candidate: the same results, 8 bytes more per entry (about 128 "
@@ -99,7 +107,8 @@ class MihIndex {
   void deferMerges(bool defer);
 
   // Calls visit(feature_id, table) for every stored id below id_limit in every live bucket within
-  // radius r of q's substrings (in no particular order within a bucket).
+  // radius r of q's substrings (in no particular order within a bucket); with a query budget
+  // (max_candidates_per_feature), for the ids of the shortest buckets up to that many.
   template <class Visit>
   void probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
 
@@ -159,6 +168,8 @@ class MihIndex {
   size_t bucketCap(int t) const;
   template <bool kPrefixes, class Visit>
   void probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  template <bool kPrefixes, class Visit>
+  void probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
   void merge(Table& table);
   size_t slotCount(const Table& table) const { return table.slots.size() - 1; }
   static size_t mergeThreshold(const Table& table);
@@ -168,6 +179,7 @@ class MihIndex {
   std::vector<Table> tables_;
   // XOR masks with popcount <= r, per substring length (index = length).
   std::vector<std::vector<uint64_t>> probe_masks_;
+  uint32_t query_budget_ = 0;  // max_candidates_per_feature scaled to the table count
   size_t entry_count_ = 0;
   size_t discarded_buckets_ = 0;
   uint64_t evicted_entries_ = 0;
@@ -204,6 +216,10 @@ void MihIndex::probeWithPrefixes(const Descriptor& q, FeatureId id_limit, ProbeC
 
 template <bool kPrefixes, class Visit>
 void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
+  if (query_budget_ > 0) {
+    probeWithinBudget<kPrefixes>(q, id_limit, counters, visit);
+    return;
+  }
   // Buckets are scattered in memory. Their slots are requested in a batch first, then their runs,
   // so that the loads overlap instead of following one another.
   constexpr size_t kBatch = 64;
@@ -257,6 +273,68 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
     }
   }
   drain();
+}
+
+template <bool kPrefixes, class Visit>
+void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters,
+                                 Visit&& visit) const {
+  // The buckets of one query feature, shortest first: a short bucket is a distinctive substring
+  // (high IDF, and what finds an old place); the longest ones are what grows with the map.
+  struct Bucket {
+    uint32_t length;
+    uint32_t slot;
+    int t;
+  };
+  thread_local std::vector<Bucket> buckets;
+  buckets.clear();
+  const int m = layout_.count();
+  for (int t = 0; t < m; ++t) {
+    const uint64_t key = layout_.key(q, t);
+    const Table& table = tables_[t];
+    for (uint64_t flip : probe_masks_[layout_.length(t)]) {
+      ++counters.buckets_probed;
+      const uint32_t slot = table.find(key ^ flip);
+      if (slot == kNone) continue;
+      __builtin_prefetch(&table.slots[slot]);
+      buckets.push_back({0, slot, t});
+    }
+  }
+  for (Bucket& b : buckets) {
+    const Table& table = tables_[b.t];
+    const Slot& s = table.slots[b.slot];
+    b.length = s.recent == kDiscarded ? 0 : s.count;
+    if (b.length > 0 && s.end > s.offset) {
+      __builtin_prefetch(table.ids.data() + s.end - 1);  // read newest first, from the run's end
+      if constexpr (kPrefixes) __builtin_prefetch(table.prefixes.data() + s.end - 1);
+    }
+  }
+  std::sort(buckets.begin(), buckets.end(),
+            [](const Bucket& a, const Bucket& b) { return a.length != b.length ? a.length < b.length : a.t < b.t; });
+  uint32_t budget = query_budget_;
+  for (const Bucket& b : buckets) {
+    if (budget == 0) break;
+    if (b.length == 0) continue;
+    const Table& table = tables_[b.t];
+    const Slot& s = table.slots[b.slot];
+    for (uint32_t link = s.recent; link != kNone && budget > 0; link = table.recent[link].next) {
+      const Link& l = table.recent[link];
+      if (l.id >= id_limit) continue;  // recent ids descend: newest first
+      ++counters.entries_visited;
+      --budget;
+      visit(l.id, l.prefix, b.t);
+    }
+    const FeatureId* ids = table.ids.data();
+    uint32_t e = s.end;
+    while (e != s.offset && ids[e - 1] >= id_limit) --e;  // settled ids ascend within a bucket
+    for (; e != s.offset && budget > 0; --e, --budget) {
+      ++counters.entries_visited;
+      if constexpr (kPrefixes) {
+        visit(ids[e - 1], table.prefixes[e - 1], b.t);
+      } else {
+        visit(ids[e - 1], uint64_t{0}, b.t);
+      }
+    }
+  }
 }
 
 }  // namespace mild

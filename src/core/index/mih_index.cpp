@@ -42,6 +42,9 @@ uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
 MihIndex::MihIndex(const MihParams& params, int bits)
     : params_(params), layout_((params.validate(), params.tablesFor(bits)), bits) {
   probe_masks_ = layout_.probeMasks(params_.radius);
+  // Per 16 tables, so that a table's share stays the same for wider descriptors (more tables).
+  const uint64_t budget = (uint64_t{params_.max_candidates_per_feature} * layout_.count() + 15) / 16;
+  query_budget_ = static_cast<uint32_t>(std::min<uint64_t>(budget, UINT32_MAX));
   clear();
 }
 
