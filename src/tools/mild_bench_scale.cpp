@@ -210,12 +210,13 @@ int run(const Options& opt) {
     }
   }
 
-  // The MIH columns are the index without the bound on bucket length (early termination at 20 of
-  // the first 64 bits as shipped); the bounded column adds it, and with the shipped bound it is the
-  // shipped configuration (config/default.yaml).
+  // The MIH columns are the index without the bound on bucket length or the query budget (early
+  // termination at 20 of the first 64 bits as shipped); the bounded column adds both, and with the
+  // shipped values it is the shipped configuration (config/default.yaml).
   mild::DatabaseParams et_params;
   et_params.descriptor_bytes = extractor.descriptorBytes();
-  et_params.index.max_bucket_entries = 0;
+  et_params.index.max_bucket_entries = 0;  // the index unbounded: every bucket whole, every entry read
+  et_params.index.max_candidates_per_feature = 0;
   const uint32_t shipped_bound = mild::MihParams{}.max_bucket_entries;
   const int bits = et_params.descriptor_bytes * 8;
   mild::DatabaseParams full_params = et_params;

@@ -43,6 +43,8 @@ TEST(MildBenchScale, ReportsEveryColumnPerSize) {
     EXPECT_GT(row["bytes_per_feature"].get<double>(), 32.0) << "at least the descriptor";
     EXPECT_EQ(row["default_ms_median"], row["mih_bounded_ms_median"]) << "the shipped configuration is bounded";
     EXPECT_GT(row["bound"].get<int>(), 0) << "the shipped bound (index/max_bucket_entries)";
+    ASSERT_GT(row["query_budget"].get<int>(), 0) << "the shipped query budget (index/max_candidates_per_feature)";
+    EXPECT_LE(row["default_candidates_per_query_feature"].get<double>(), row["query_budget"].get<double>());
     EXPECT_LE(row["insert_ms_last_tenth"].get<double>(), row["insert_ms_max"].get<double>());
     EXPECT_GT(row["inline_bytes_per_feature"].get<double>(), row["bytes_per_feature"].get<double>());
     // faiss answers the database's question on the same descriptors: pairs within d0, MIH a subset.
