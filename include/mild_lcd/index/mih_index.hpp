@@ -166,6 +166,10 @@ class MihIndex {
   };
 
   size_t bucketCap(int t) const;
+  // Calls found(table, slot, t) for every existing bucket within radius r of q's substrings, its
+  // slot already requested from memory.
+  template <class Found>
+  void forEachProbedBucket(const Descriptor& q, ProbeCounters& counters, Found&& found) const;
   template <bool kPrefixes, class Visit>
   void probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
   template <bool kPrefixes, class Visit>
@@ -214,6 +218,22 @@ void MihIndex::probeWithPrefixes(const Descriptor& q, FeatureId id_limit, ProbeC
   probeRuns<true>(q, id_limit, counters, [&](FeatureId id, uint64_t prefix, int) { visit(id, prefix); });
 }
 
+template <class Found>
+void MihIndex::forEachProbedBucket(const Descriptor& q, ProbeCounters& counters, Found&& found) const {
+  const int m = layout_.count();
+  for (int t = 0; t < m; ++t) {
+    const uint64_t key = layout_.key(q, t);
+    const Table& table = tables_[t];
+    for (uint64_t flip : probe_masks_[layout_.length(t)]) {
+      ++counters.buckets_probed;
+      const uint32_t slot = table.find(key ^ flip);
+      if (slot == kNone) continue;
+      __builtin_prefetch(&table.slots[slot]);
+      found(table, slot, t);
+    }
+  }
+}
+
 template <bool kPrefixes, class Visit>
 void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
   if (query_budget_ > 0) {
@@ -259,19 +279,10 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
     }
     pending = 0;
   };
-  const int m = layout_.count();
-  for (int t = 0; t < m; ++t) {
-    const uint64_t key = layout_.key(q, t);
-    const Table& table = tables_[t];
-    for (uint64_t flip : probe_masks_[layout_.length(t)]) {
-      ++counters.buckets_probed;
-      const uint32_t slot = table.find(key ^ flip);
-      if (slot == kNone) continue;
-      __builtin_prefetch(&table.slots[slot]);
-      batch[pending++] = {&table, slot, t};
-      if (pending == kBatch) drain();
-    }
-  }
+  forEachProbedBucket(q, counters, [&](const Table& table, uint32_t slot, int t) {
+    batch[pending++] = {&table, slot, t};
+    if (pending == kBatch) drain();
+  });
   drain();
 }
 
@@ -287,18 +298,7 @@ void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeC
   };
   thread_local std::vector<Bucket> buckets;
   buckets.clear();
-  const int m = layout_.count();
-  for (int t = 0; t < m; ++t) {
-    const uint64_t key = layout_.key(q, t);
-    const Table& table = tables_[t];
-    for (uint64_t flip : probe_masks_[layout_.length(t)]) {
-      ++counters.buckets_probed;
-      const uint32_t slot = table.find(key ^ flip);
-      if (slot == kNone) continue;
-      __builtin_prefetch(&table.slots[slot]);
-      buckets.push_back({0, slot, t});
-    }
-  }
+  forEachProbedBucket(q, counters, [](const Table&, uint32_t slot, int t) { buckets.push_back({0, slot, t}); });
   for (Bucket& b : buckets) {
     const Table& table = tables_[b.t];
     const Slot& s = table.slots[b.slot];
