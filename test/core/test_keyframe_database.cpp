@@ -305,6 +305,23 @@ TEST(KeyframeDatabase, HoldsMoreThan65535KeyframesWithoutWrapAround) {
   }
 }
 
+// Votes find their keyframe through a table of 256-feature blocks: keyframes of every size,
+// empty ones and ones spanning several blocks included, must own exactly their features.
+TEST(KeyframeDatabase, KeyframeOfNamesTheOwnerOfEveryFeature) {
+  std::mt19937_64 rng(52);
+  KeyframeDatabase db{DatabaseParams{}};
+  const std::vector<size_t> sizes = {0, 1, 255, 0, 0, 1, 256, 257, 3, 700, 0, 1, 1, 1, 600, 2, 513, 0};
+  for (int round = 0; round < 2; ++round) {  // and again after clear()
+    for (size_t n : sizes) db.insert(test::randomDescriptors(n, rng));
+    for (KeyframeIndex k = 0; k < db.size(); ++k) {
+      for (FeatureId f = db.firstFeature(k); f < db.firstFeature(k) + db.featureCount(k); ++f) {
+        ASSERT_EQ(db.keyframeOf(f), k) << "feature " << f;
+      }
+    }
+    db.clear();
+  }
+}
+
 TEST(KeyframeDatabase, RejectsMalformedDescriptorsAndStaysUnchanged) {
   std::mt19937_64 rng(61);
   KeyframeDatabase db;

@@ -79,12 +79,13 @@ struct ProbeCounters {
 // Layout, per table. Buckets are slots: the substring value itself for substrings up to 20 bits
 // (every slot preallocated), or a slot number handed out on first use for longer substrings.
 // Settled entries sit in one contiguous array, bucket after bucket (compressed sparse rows), so a
-// probe reads a bucket's ids in one sequential run; entries added since the last merge sit in
-// per-bucket chains. When the chains of a table hold more than 1/64 of its settled entries they
-// are merged into the array: each entry is copied a bounded number of times over its life, and
-// no bucket carries the spare capacity (or the 24-byte header) of a vector of its own. A merge
-// shifts the runs within the array (which keeps an eighth of spare room), so that it neither
-// allocates nor clears a new array of every entry (README "Insert time" measures it).
+// probe reads a bucket's ids in one sequential run. Each run is followed by some free room (an
+// eighth of its length, left by the last merge), where new entries of that bucket go; once it is
+// full they sit in per-bucket chains. When the chains of a table hold more than 1/64 of its settled
+// entries they are merged into the array: each entry is copied a bounded number of times over its
+// life, and no bucket carries the 24-byte header of a vector of its own. A merge shifts the runs
+// within the array (which keeps an eighth of spare room), so that it neither allocates nor clears a
+// new array of every entry (README "Insert time" measures it).
 class MihIndex {
  public:
   // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit
@@ -175,6 +176,7 @@ class MihIndex {
   template <bool kPrefixes, class Visit>
   void probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
   void merge(Table& table);
+  static uint32_t roomAfter(uint32_t entries);  // free entries a merge leaves after a run of `entries`
   size_t slotCount(const Table& table) const { return table.slots.size() - 1; }
   static size_t mergeThreshold(const Table& table);
 
@@ -299,21 +301,19 @@ void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeC
   thread_local std::vector<Bucket> buckets;
   buckets.clear();
   forEachProbedBucket(q, counters, [](const Table&, uint32_t slot, int t) { buckets.push_back({0, slot, t}); });
+  uint64_t total = 0;
   for (Bucket& b : buckets) {
     const Table& table = tables_[b.t];
     const Slot& s = table.slots[b.slot];
     b.length = s.recent == kDiscarded ? 0 : s.count;
+    total += b.length;
     if (b.length > 0 && s.end > s.offset) {
       __builtin_prefetch(table.ids.data() + s.end - 1);  // read newest first, from the run's end
       if constexpr (kPrefixes) __builtin_prefetch(table.prefixes.data() + s.end - 1);
     }
   }
-  std::sort(buckets.begin(), buckets.end(),
-            [](const Bucket& a, const Bucket& b) { return a.length != b.length ? a.length < b.length : a.t < b.t; });
   uint32_t budget = query_budget_;
-  for (const Bucket& b : buckets) {
-    if (budget == 0) break;
-    if (b.length == 0) continue;
+  const auto read = [&](const Bucket& b) {
     const Table& table = tables_[b.t];
     const Slot& s = table.slots[b.slot];
     for (uint32_t link = s.recent; link != kNone && budget > 0; link = table.recent[link].next) {
@@ -334,6 +334,18 @@ void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeC
         visit(ids[e - 1], uint64_t{0}, b.t);
       }
     }
+  };
+  if (total <= budget) {  // everything fits (small maps): the order does not matter
+    for (const Bucket& b : buckets) {
+      if (b.length > 0) read(b);
+    }
+    return;
+  }
+  std::sort(buckets.begin(), buckets.end(),
+            [](const Bucket& a, const Bucket& b) { return a.length != b.length ? a.length < b.length : a.t < b.t; });
+  for (const Bucket& b : buckets) {
+    if (budget == 0) break;
+    if (b.length > 0) read(b);
   }
 }
 

@@ -18,9 +18,12 @@ constexpr int kMaxDenseBits = 20;
 
 size_t MihIndex::mergeThreshold(const Table& table) {
   // Recent entries cost a dependent load each at query time; 1/64 of the settled ones keeps them
-  // rare while each entry is copied about 64 times over its life (a memmove, cheap). The tables
-  // grow alike, so with one threshold all of them merged in the same keyframe, which then paid
-  // for 16 merges at once: table t waits for (16 + t % 16) / 16 of it, and their merges drift apart.
+  // rare. A merge moves every run, so without the room after each run (roomAfter) each entry was
+  // copied about 64 times over its life; most new entries now land in that room instead. Measured on
+  // the public sequences: a floor of 2,048 or 16,384 instead of 4,096 is slower (more merges, or
+  // more chains). The tables grow alike, so with one threshold all of them merged in the same
+  // keyframe, which then paid for 16 merges at once: table t waits for (16 + t % 16) / 16 of it, and their merges drift
+  // apart.
   return std::max<size_t>(4096, table.ids.size() / 64) * (16 + table.stagger) / 16;
 }
 
@@ -113,13 +116,22 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
         ++discarded_buckets_;
         continue;
       }
-      table.recent.push_back({first_id + static_cast<FeatureId>(i), slot.recent, s, descriptors[i].words[0]});
-      slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
-      if (params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries && slot.offset < slot.end) {
+      const bool evict =
+          params_.max_bucket_entries > 0 && slot.count >= params_.max_bucket_entries && slot.offset < slot.end;
+      if (evict) {
         ++slot.offset;  // the oldest settled entry gives way (the merge drops recent ones over the bound)
         ++evicted_entries_;
-        continue;
       }
+      const FeatureId id = first_id + static_cast<FeatureId>(i);
+      if (slot.recent == kNone && slot.end < table.slots[s + 1].offset) {
+        // Room the last merge left after the run: the entry joins it, and is read with it.
+        if (params_.inline_prefixes) table.prefixes[slot.end] = descriptors[i].words[0];
+        table.ids[slot.end++] = id;
+      } else {
+        table.recent.push_back({id, slot.recent, s, descriptors[i].words[0]});
+        slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
+      }
+      if (evict) continue;
       ++slot.count;
       ++table.entries;
       ++entry_count_;
@@ -142,63 +154,90 @@ void MihIndex::deferMerges(bool defer) {
 
 namespace {
 
+// Moves n elements within `array` from `from` to `to`; the ranges may overlap. Most runs are a few
+// entries long, and a memmove call per run cost more than the copy (merges touch every bucket).
+template <class T>
+inline void moveRun(T* array, uint32_t to, uint32_t from, uint32_t n) {
+  constexpr uint32_t kShort = 16;
+  if (n <= kShort) {
+    T held[kShort];
+    for (uint32_t i = 0; i < n; ++i) held[i] = array[from + i];
+    for (uint32_t i = 0; i < n; ++i) array[to + i] = held[i];
+  } else {
+    std::memmove(array + to, array + from, n * sizeof(T));
+  }
+}
+
 // Moves every bucket's kept settled run from[s] (length kept[s]) to start[s] within `array`, in
 // place. Runs keep their order, so runs moving left are moved first to last and runs moving right
 // last to first: neither overwrites a run that has yet to move.
 template <class T>
-void shiftRuns(T* array, const std::vector<uint32_t>& from, const std::vector<uint32_t>& kept,
-               const std::vector<uint32_t>& start) {
-  const size_t slots = kept.size();
+void shiftRuns(T* array, const uint32_t* from, const uint32_t* kept, const uint32_t* start, size_t slots) {
   for (size_t s = 0; s < slots; ++s) {
-    if (kept[s] > 0 && start[s] < from[s]) std::memmove(array + start[s], array + from[s], kept[s] * sizeof(T));
+    if (kept[s] > 0 && start[s] < from[s]) moveRun(array, start[s], from[s], kept[s]);
   }
   for (size_t s = slots; s-- > 0;) {
-    if (kept[s] > 0 && start[s] > from[s]) std::memmove(array + start[s], array + from[s], kept[s] * sizeof(T));
+    if (kept[s] > 0 && start[s] > from[s]) moveRun(array, start[s], from[s], kept[s]);
   }
 }
 
 }  // namespace
 
+uint32_t MihIndex::roomAfter(uint32_t entries) {
+  // An eighth: buckets grow roughly in proportion to their length, so most of them fill their room
+  // together, after the table has grown by about an eighth; until then new entries need no chain,
+  // and merges (which move every run) come about eight times less often than with no room.
+  return (entries + 7) / 8;
+}
+
 void MihIndex::merge(Table& table) {
   // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
-  // ids, so scattering them in that order keeps every bucket's ids ascending.
+  // ids, so scattering them in that order keeps every bucket's ids ascending. Every pass over the
+  // buckets is sequential, through plain pointers (a merge visits all 65,536 buckets of a table).
   const size_t slots = slotCount(table);
   const uint32_t bound = params_.max_bucket_entries;
   MergeScratch& scratch = merge_scratch_;
-  std::vector<uint32_t>& start = scratch.start;
-  std::vector<uint32_t>& recent_in = scratch.recent_in;
-  start.resize(slots + 1);
-  start[0] = 0;
-  recent_in.assign(slots, 0);
-  for (const Link& link : table.recent) {
-    if (table.slots[link.slot].recent != kDiscarded) ++recent_in[link.slot];
-  }
+  scratch.start.resize(slots + 1);
+  scratch.recent_in.assign(slots, 0);
+  scratch.from.resize(slots);  // every element is written below
+  scratch.kept.resize(slots);
+  scratch.skip_recent.assign(bound > 0 ? slots : 0, 0);
+  uint32_t* const start = scratch.start.data();
+  uint32_t* const recent_in = scratch.recent_in.data();
+  uint32_t* const from = scratch.from.data();
+  uint32_t* const kept = scratch.kept.data();
+  uint32_t* const skip_recent = scratch.skip_recent.data();
+  Slot* const slot_at = table.slots.data();
+  for (const Link& link : table.recent) ++recent_in[link.slot];  // discarded buckets: ignored below
   // Each bucket's settled entries that stay: from[s] .. from[s] + kept[s] in the array. Over the
-  // bound (max_bucket_entries) a bucket's oldest entries go, settled ones first.
-  std::vector<uint32_t>& from = scratch.from;
-  std::vector<uint32_t>& kept = scratch.kept;
-  std::vector<uint32_t>& skip_recent = scratch.skip_recent;
-  from.resize(slots);  // every element is written below
-  kept.resize(slots);
-  skip_recent.assign(bound > 0 ? slots : 0, 0);
+  // bound (max_bucket_entries) a bucket's oldest entries go, settled ones first. Its offset becomes
+  // its write cursor for the recent entries.
+  start[0] = 0;
+  uint64_t evicted = 0;
   for (size_t s = 0; s < slots; ++s) {
-    const Slot& slot = table.slots[s];
-    uint32_t settled = slot.recent == kDiscarded ? 0 : slot.end - slot.offset;
+    Slot& slot = slot_at[s];
+    const bool discarded = slot.recent == kDiscarded;
+    if (discarded) recent_in[s] = 0;
+    uint32_t settled = discarded ? 0 : slot.end - slot.offset;
     from[s] = slot.offset;
+    uint32_t skipped = 0;
     if (bound > 0 && settled + recent_in[s] > bound) {
       uint32_t excess = settled + recent_in[s] - bound;
       const uint32_t from_settled = std::min(excess, settled);
       from[s] += from_settled;
       settled -= from_settled;
-      excess -= from_settled;
-      skip_recent[s] = excess;
-      evicted_entries_ += from_settled + excess;
-      table.entries -= from_settled + excess;
-      entry_count_ -= from_settled + excess;
+      skipped = excess - from_settled;
+      skip_recent[s] = skipped;
+      evicted += excess;
     }
     kept[s] = settled;
-    start[s + 1] = start[s] + settled + recent_in[s] - (bound > 0 ? skip_recent[s] : 0);
+    const uint32_t entries = settled + recent_in[s] - skipped;
+    start[s + 1] = start[s] + entries + roomAfter(entries);
+    slot.offset = start[s] + settled;
   }
+  evicted_entries_ += evicted;
+  table.entries -= evicted;
+  entry_count_ -= evicted;
   const size_t total = start[slots];
   const bool prefixes = params_.inline_prefixes;
   // Past the spare room an array grows by an eighth more (its mapping is extended, not copied), and
@@ -206,31 +245,32 @@ void MihIndex::merge(Table& table) {
   // of different numbers of elements.
   if (total > table.ids.capacity()) table.ids.reserve(total + total / 8);
   if (prefixes && total > table.prefixes.capacity()) table.prefixes.reserve(total + total / 8);
-  shiftRuns(table.ids.data(), from, kept, start);
-  if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start);
+  shiftRuns(table.ids.data(), from, kept, start, slots);
+  if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start, slots);
   table.ids.resize(total);  // shrinks after discards or evictions; the room stays
   if (prefixes) table.prefixes.resize(total);
-  for (size_t s = 0; s < slots; ++s) table.slots[s].offset = start[s] + kept[s];  // each bucket's write cursor
+  FeatureId* const ids = table.ids.data();
+  uint64_t* const prefix_at = prefixes ? table.prefixes.data() : nullptr;
   for (const Link& link : table.recent) {
-    Slot& slot = table.slots[link.slot];
+    Slot& slot = slot_at[link.slot];
     if (slot.recent == kDiscarded) continue;
     if (bound > 0 && skip_recent[link.slot] > 0) {
       --skip_recent[link.slot];
       continue;
     }
-    if (prefixes) table.prefixes[slot.offset] = link.prefix;
-    table.ids[slot.offset++] = link.id;
+    if (prefixes) prefix_at[slot.offset] = link.prefix;
+    ids[slot.offset++] = link.id;
   }
   for (size_t s = 0; s < slots; ++s) {
-    Slot& slot = table.slots[s];
+    Slot& slot = slot_at[s];
+    slot.end = slot.offset;  // the write cursor, past the bucket's entries
     slot.offset = start[s];
-    slot.end = start[s + 1];
     if (slot.recent != kDiscarded) {
       slot.recent = kNone;
-      slot.count = start[s + 1] - start[s];
+      slot.count = slot.end - slot.offset;
     }
   }
-  table.slots[slots].offset = table.slots[slots].end = start[slots];
+  slot_at[slots].offset = slot_at[slots].end = start[slots];
   table.recent.clear();
   if (table.recent.capacity() > 2 * mergeThreshold(table)) {  // after a bulk load: give the room back
     std::vector<Link>().swap(table.recent);

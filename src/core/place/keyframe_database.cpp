@@ -116,6 +116,7 @@ void KeyframeDatabase::clear() {
   heads_.release();
   tails_.release();
   keyframe_offsets_.assign(1, 0);
+  block_keyframe_.clear();
 }
 
 KeyframeIndex KeyframeDatabase::insert(const cv::Mat& descriptors) {
@@ -147,12 +148,19 @@ KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
   }
   index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
   keyframe_offsets_.push_back(static_cast<FeatureId>(total));
+  // Blocks that start within this keyframe's features are held by it.
+  while ((static_cast<uint64_t>(block_keyframe_.size()) << kBlockShift) < total) block_keyframe_.push_back(k);
   return k;
 }
 
 KeyframeIndex KeyframeDatabase::keyframeOf(FeatureId f) const {
-  // keyframe_offsets_ ascends; keyframe k owns [offsets[k], offsets[k+1]).
-  const auto it = std::upper_bound(keyframe_offsets_.begin(), keyframe_offsets_.end(), f);
+  // keyframe_offsets_ ascends; keyframe k owns [offsets[k], offsets[k+1]). Feature f lies between the
+  // keyframe holding its block's first feature and the one holding the next block's.
+  const size_t block = f >> kBlockShift;
+  const auto first = keyframe_offsets_.begin() + block_keyframe_[block];
+  const auto last = block + 1 < block_keyframe_.size() ? keyframe_offsets_.begin() + block_keyframe_[block + 1] + 1
+                                                       : keyframe_offsets_.end();
+  const auto it = std::upper_bound(first, last, f);
   return static_cast<KeyframeIndex>(it - keyframe_offsets_.begin() - 1);
 }
 
@@ -380,7 +388,7 @@ QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, 
 
 size_t KeyframeDatabase::memoryBytes() const {
   return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(uint64_t) +
-         keyframe_offsets_.capacity() * sizeof(FeatureId);
+         keyframe_offsets_.capacity() * sizeof(FeatureId) + block_keyframe_.capacity() * sizeof(KeyframeIndex);
 }
 
 }  // namespace mild
