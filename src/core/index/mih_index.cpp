@@ -22,8 +22,8 @@ size_t MihIndex::mergeThreshold(const Table& table) {
   // copied about 64 times over its life; most new entries now land in that room instead. Measured on
   // the public sequences: a floor of 2,048 or 16,384 instead of 4,096 is slower (more merges, or
   // more chains). The tables grow alike, so with one threshold all of them merged in the same
-  // keyframe, which then paid for 16 merges at once: table t waits for (16 + t % 16) / 16 of it, and their merges drift
-  // apart.
+  // keyframe, which then paid for 16 merges at once: table t waits for (16 + t % 16) / 16 of it,
+  // and their merges drift apart.
   return std::max<size_t>(4096, table.ids.size() / 64) * (16 + table.stagger) / 16;
 }
 
@@ -186,8 +186,10 @@ void shiftRuns(T* array, const uint32_t* from, const uint32_t* kept, const uint3
 uint32_t MihIndex::roomAfter(uint32_t entries) {
   // An eighth: buckets grow roughly in proportion to their length, so most of them fill their room
   // together, after the table has grown by about an eighth; until then new entries need no chain,
-  // and merges (which move every run) come about eight times less often than with no room.
-  return (entries + 7) / 8;
+  // and merges (which move every run) come about eight times less often than with no room. Plus one,
+  // for the empty and short buckets of a small map (5-15 % faster on pub_corridor and pub_city than
+  // without it, for 4 MB at 16 tables).
+  return entries / 8 + 1;
 }
 
 void MihIndex::merge(Table& table) {
