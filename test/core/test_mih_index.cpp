@@ -3,6 +3,7 @@
 #include <map>
 #include <random>
 #include <set>
+#include <string>
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/index/mih_index.hpp"
@@ -150,56 +151,60 @@ TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
 // run, then in chains, and merges move everything into place; at every point in between a probe
 // must see exactly the entries a plain model of the tables holds. Substrings drawn from a small
 // alphabet make buckets long and shared, so that rooms fill, chains form and merges happen.
+// m = 16: directly addressed tables; m = 8: 32-bit substrings, slots handed out on first use.
 TEST(MihIndex, LiveInsertionFindsExactlyTheBucketMembersThroughRoomsChainsAndMerges) {
-  std::mt19937_64 rng(77);
-  MihParams p = uncapped(16, 0);
-  p.max_bucket_entries = 0;  // every entry stays (BoundedBuckets... tests the bound)
-  MihIndex index(p, kOrbBits);
-  const SubstringLayout& layout = index.layout();
-  const auto draw = [&rng] {
-    Descriptor d(kOrbDescriptorBytes);
-    for (auto& w : d.words) {
-      w = 0;
-      for (int part = 0; part < 4; ++part) w |= (rng() % 48) << (16 * part);
-    }
-    return d;
-  };
-  std::vector<std::map<uint64_t, std::set<FeatureId>>> model(16);  // table -> key -> ids
-  FeatureId next = 0;
-  for (int k = 0; k < 600; ++k) {
-    DescriptorList kf(25);
-    for (auto& d : kf) d = draw();
-    for (int t = 0; t < 16; ++t) {
-      std::set<uint64_t> seen;  // one entry per keyframe per bucket
-      for (size_t i = 0; i < kf.size(); ++i) {
-        if (seen.insert(layout.key(kf[i], t)).second) model[t][layout.key(kf[i], t)].insert(next + i);
+  for (const int m : {16, 8}) {
+    SCOPED_TRACE("m = " + std::to_string(m));
+    std::mt19937_64 rng(77);
+    MihParams p = uncapped(m, 0);
+    p.max_bucket_entries = 0;  // every entry stays (BoundedBuckets... tests the bound)
+    MihIndex index(p, kOrbBits);
+    const SubstringLayout& layout = index.layout();
+    const auto draw = [&rng] {
+      Descriptor d(kOrbDescriptorBytes);
+      for (auto& w : d.words) {
+        w = 0;
+        for (int part = 0; part < 4; ++part) w |= (rng() % 48) << (16 * part);
+      }
+      return d;
+    };
+    std::vector<std::map<uint64_t, std::set<FeatureId>>> model(m);  // table -> key -> ids
+    FeatureId next = 0;
+    for (int k = 0; k < 600; ++k) {
+      DescriptorList kf(25);
+      for (auto& d : kf) d = draw();
+      for (int t = 0; t < m; ++t) {
+        std::set<uint64_t> seen;  // one entry per keyframe per bucket
+        for (size_t i = 0; i < kf.size(); ++i) {
+          if (seen.insert(layout.key(kf[i], t)).second) model[t][layout.key(kf[i], t)].insert(next + i);
+        }
+      }
+      index.insertKeyframe(kf.data(), kf.size(), next);
+      next += static_cast<FeatureId>(kf.size());
+      if (k % 37 == 0 || k == 599) {
+        for (int q = 0; q < 20; ++q) {
+          const Descriptor query = draw();
+          std::set<FeatureId> expected;
+          for (int t = 0; t < m; ++t) {
+            const auto it = model[t].find(layout.key(query, t));
+            if (it != model[t].end()) expected.insert(it->second.begin(), it->second.end());
+          }
+          ASSERT_EQ(visited(index, query), expected) << "after keyframe " << k;
+          const FeatureId limit = next / 2;
+          std::set<FeatureId> below;
+          for (FeatureId id : expected) {
+            if (id < limit) below.insert(id);
+          }
+          ASSERT_EQ(visited(index, query, limit), below) << "after keyframe " << k;
+        }
       }
     }
-    index.insertKeyframe(kf.data(), kf.size(), next);
-    next += static_cast<FeatureId>(kf.size());
-    if (k % 37 == 0 || k == 599) {
-      for (int q = 0; q < 20; ++q) {
-        const Descriptor query = draw();
-        std::set<FeatureId> expected;
-        for (int t = 0; t < 16; ++t) {
-          const auto it = model[t].find(layout.key(query, t));
-          if (it != model[t].end()) expected.insert(it->second.begin(), it->second.end());
-        }
-        ASSERT_EQ(visited(index, query), expected) << "after keyframe " << k;
-        const FeatureId limit = next / 2;
-        std::set<FeatureId> below;
-        for (FeatureId id : expected) {
-          if (id < limit) below.insert(id);
-        }
-        ASSERT_EQ(visited(index, query, limit), below) << "after keyframe " << k;
-      }
+    size_t stored = 0;
+    for (const auto& table : model) {
+      for (const auto& [key, ids] : table) stored += ids.size();
     }
+    EXPECT_EQ(index.entryCount(), stored);
   }
-  size_t stored = 0;
-  for (const auto& table : model) {
-    for (const auto& [key, ids] : table) stored += ids.size();
-  }
-  EXPECT_EQ(index.entryCount(), stored);
 }
 
 // A query budget reads the shortest buckets first and the newest entries of the last one it

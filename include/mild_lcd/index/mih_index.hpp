@@ -79,13 +79,14 @@ struct ProbeCounters {
 // Layout, per table. Buckets are slots: the substring value itself for substrings up to 20 bits
 // (every slot preallocated), or a slot number handed out on first use for longer substrings.
 // Settled entries sit in one contiguous array, bucket after bucket (compressed sparse rows), so a
-// probe reads a bucket's ids in one sequential run. Each run is followed by some free room (an
-// eighth of its length, left by the last merge), where new entries of that bucket go; once it is
-// full they sit in per-bucket chains. When the chains of a table hold more than 1/64 of its settled
-// entries they are merged into the array: each entry is copied a bounded number of times over its
-// life, and no bucket carries the 24-byte header of a vector of its own. A merge shifts the runs
-// within the array (which keeps an eighth of spare room), so that it neither allocates nor clears a
-// new array of every entry (README "Insert time" measures it).
+// probe reads a bucket's ids in one sequential run. Each run is followed by free room (roomAfter:
+// an eighth of its length plus one, left by the last merge), where new entries of that bucket go;
+// once it is full they sit in per-bucket chains. When the chains of a table hold more than 1/64 of
+// its settled entries they are merged into the array: each entry is copied a bounded number of
+// times over its life, and no bucket carries the 24-byte header of a vector of its own. A merge
+// shifts the runs within the array (whose capacity keeps a further eighth spare), so that it
+// neither allocates nor clears a new array of every entry (README "Insert time", "Room after each
+// run").
 class MihIndex {
  public:
   // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit

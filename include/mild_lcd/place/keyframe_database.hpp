@@ -145,8 +145,8 @@ class KeyframeDatabase {
   MappedArray<uint64_t> tails_;              // the other words, tail_words_ per feature
   std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
   // Every vote needs its keyframe: a binary search over keyframe_offsets_ per vote cost 9% of a query
-  // at 1,000 keyframes. block_keyframe_[b] is the keyframe holding feature b * kBlockFeatures (or the
-  // next one to arrive), so a lookup searches only the few keyframes within one block.
+  // at 1,000 keyframes. block_keyframe_[b] is the keyframe holding feature b << kBlockShift, so a lookup searches only
+  // the few keyframes within one block.
   static constexpr int kBlockShift = 8;
   std::vector<KeyframeIndex> block_keyframe_;
 };

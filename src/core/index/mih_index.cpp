@@ -154,30 +154,16 @@ void MihIndex::deferMerges(bool defer) {
 
 namespace {
 
-// Moves n elements within `array` from `from` to `to`; the ranges may overlap. Most runs are a few
-// entries long, and a memmove call per run cost more than the copy (merges touch every bucket).
-template <class T>
-inline void moveRun(T* array, uint32_t to, uint32_t from, uint32_t n) {
-  constexpr uint32_t kShort = 16;
-  if (n <= kShort) {
-    T held[kShort];
-    for (uint32_t i = 0; i < n; ++i) held[i] = array[from + i];
-    for (uint32_t i = 0; i < n; ++i) array[to + i] = held[i];
-  } else {
-    std::memmove(array + to, array + from, n * sizeof(T));
-  }
-}
-
 // Moves every bucket's kept settled run from[s] (length kept[s]) to start[s] within `array`, in
 // place. Runs keep their order, so runs moving left are moved first to last and runs moving right
 // last to first: neither overwrites a run that has yet to move.
 template <class T>
 void shiftRuns(T* array, const uint32_t* from, const uint32_t* kept, const uint32_t* start, size_t slots) {
   for (size_t s = 0; s < slots; ++s) {
-    if (kept[s] > 0 && start[s] < from[s]) moveRun(array, start[s], from[s], kept[s]);
+    if (kept[s] > 0 && start[s] < from[s]) std::memmove(array + start[s], array + from[s], kept[s] * sizeof(T));
   }
   for (size_t s = slots; s-- > 0;) {
-    if (kept[s] > 0 && start[s] > from[s]) moveRun(array, start[s], from[s], kept[s]);
+    if (kept[s] > 0 && start[s] > from[s]) std::memmove(array + start[s], array + from[s], kept[s] * sizeof(T));
   }
 }
 

@@ -9,7 +9,6 @@
 //   mild_lcd: LoopDetector::process on the same keypoints and descriptors (default parameters,
 //             geometric verification off: the original has none).
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -19,33 +18,14 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "../common/timing_summary.hpp"
 #include "MILD/BayesianFilter.hpp"
 #include "MILD/loop_closure_detector.h"
+#include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double msBetween(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-struct Summary {
-  double mean = 0.0, median = 0.0, p95 = 0.0;
-};
-
-Summary summarize(std::vector<double> v) {
-  Summary s;
-  if (v.empty()) return s;
-  for (double x : v) s.mean += x;
-  s.mean /= static_cast<double>(v.size());
-  std::sort(v.begin(), v.end());
-  s.median = v[v.size() / 2];
-  s.p95 = v[std::min(v.size() - 1, static_cast<size_t>(0.95 * static_cast<double>(v.size())))];
-  return s;
-}
 
 struct Frames {
   std::vector<std::vector<cv::KeyPoint>> keypoints;
@@ -73,7 +53,7 @@ Frames extract(const std::string& dir) {
   return frames;
 }
 
-Summary runOriginal(const Frames& frames) {
+mild::tools::TimingSummary runOriginal(const Frames& frames) {
   MILD::LoopClosureDetector detector(FEATURE_TYPE_ORB, 16, 0);
   MILD::BayesianFilter filter(0.6f, 4, 4.0f, 60);  // settings.yaml
   Eigen::VectorXf probability(1);
@@ -81,16 +61,16 @@ Summary runOriginal(const Frames& frames) {
   std::vector<Eigen::VectorXf> flags;
   std::vector<double> ms;
   for (const cv::Mat& d : frames.descriptors) {
-    const auto start = Clock::now();
+    const auto start = mild::Clock::now();
     std::vector<float> score;
     detector.insert_and_query_database(d, score);
     filter.filter(score, probability, flags);
-    ms.push_back(msBetween(start, Clock::now()));
+    ms.push_back(mild::msSince(start));
   }
-  return summarize(ms);
+  return mild::tools::summarize(ms);
 }
 
-Summary runMildLcd(const Frames& frames) {
+mild::tools::TimingSummary runMildLcd(const Frames& frames) {
   mild::DetectorParams params;
   params.verification.enabled = false;
   mild::LoopDetector detector(params);
@@ -99,11 +79,11 @@ Summary runMildLcd(const Frames& frames) {
     mild::Features features;
     features.keypoints = frames.keypoints[i];
     features.descriptors = mild::descriptorsFromMat(frames.descriptors[i]);
-    const auto start = Clock::now();
+    const auto start = mild::Clock::now();
     detector.process(std::move(features), static_cast<double>(i) / 10.0, i);
-    ms.push_back(msBetween(start, Clock::now()));
+    ms.push_back(mild::msSince(start));
   }
-  return summarize(ms);
+  return mild::tools::summarize(ms);
 }
 
 }  // namespace
@@ -120,8 +100,8 @@ int main(int argc, char** argv) {
   std::printf("%s: %zu frames, %.0f keypoints per frame\n", argv[1], frames.descriptors.size(),
               frames.descriptors.empty() ? 0.0 : static_cast<double>(keypoints) / frames.descriptors.size());
   for (int pass = 0; pass < passes; ++pass) {
-    const Summary original = runOriginal(frames);
-    const Summary ours = runMildLcd(frames);
+    const mild::tools::TimingSummary original = runOriginal(frames);
+    const mild::tools::TimingSummary ours = runMildLcd(frames);
     std::printf(
         "pass %d  original MILD mean %.3f median %.3f p95 %.3f ms | mild_lcd mean %.3f median %.3f p95 %.3f ms | "
         "original / mild_lcd (means) %.2f\n",
