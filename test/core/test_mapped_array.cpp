@@ -46,6 +46,21 @@ TEST(MappedArray, KeepsItsContentsAcrossGrowthPastTheHugePageLine) {
   EXPECT_TRUE(holdsPattern(words, 10));
 }
 
+// Without huge pages (the index's shards: many arrays of a few megabytes) an array past 2 MB is
+// rounded to 4 KB pages only, and keeps its contents across growth all the same.
+TEST(MappedArray, WithoutHugePagesRoundsToSmallPages) {
+  MappedArray<uint64_t, false> words;
+  const size_t n = ((size_t{3} << 20) + 4096) / sizeof(uint64_t);  // 3 MB and one page
+  for (size_t i = 0; i < n; ++i) words.push_back(pattern(i));
+  for (size_t i = 0; i < n; ++i) ASSERT_EQ(words[i], pattern(i)) << "element " << i;
+  MappedArray<uint64_t, false> exact;
+  exact.reserve(n);
+  EXPECT_EQ(exact.capacity(), n) << "3 MB and one page, not rounded up to 4 MB";
+  MappedArray<uint64_t> huge;
+  huge.reserve(n);
+  EXPECT_EQ(huge.capacity() * sizeof(uint64_t), size_t{4} << 20);
+}
+
 TEST(MappedArray, PushBackGrowsAndIterates) {
   MappedArray<uint32_t> ids;
   for (uint32_t i = 0; i < 100000; ++i) ids.push_back(i);

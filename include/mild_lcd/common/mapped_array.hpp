@@ -17,9 +17,11 @@ namespace mild {
 // its elements copied; the new part is faulted in as it is written. A std::vector of a 50,000-keyframe map
 // copies a gigabyte of descriptors and faults in its new block in one insert (a 2 s stall); here
 // growing costs microseconds however large the array. New elements are not initialised: resize()'s
-// caller writes every element it grows into. The mapping asks for transparent huge pages (advice
-// only), so that a large array is faulted in 2 MB at a time.
-template <class T>
+// caller writes every element it grows into. With kHugePages the mapping asks for transparent huge
+// pages (advice only), so that a large array is faulted in 2 MB at a time; without, it is whole
+// 4 KB pages, for the many arrays of a few megabytes where rounding each up to 2 MB would waste more
+// than the pages save.
+template <class T, bool kHugePages = true>
 class MappedArray {
   static_assert(std::is_trivially_copyable_v<T>, "MappedArray moves its elements as bytes");
 
@@ -73,7 +75,7 @@ class MappedArray {
     if (n <= capacity_) return;
     const size_t bytes = mappingBytes(n * sizeof(T));
     void* p = data_ == nullptr ? mapAligned(bytes) : grow(bytes);
-    if (bytes >= kHugePage) ::madvise(p, bytes, MADV_HUGEPAGE);
+    if (huge(bytes)) ::madvise(p, bytes, MADV_HUGEPAGE);
     data_ = static_cast<T*>(p);
     capacity_ = bytes / sizeof(T);
   }
@@ -91,14 +93,15 @@ class MappedArray {
   // Arrays of 2 MB and more are whole huge pages at 2 MB-aligned addresses: the kernel maps them
   // with huge pages only there, and the queries' random reads into the descriptor words and ids
   // cost twice as much with 4 KB pages (their TLB misses; measured at 10,000 keyframes).
+  static bool huge(size_t bytes) { return kHugePages && bytes >= kHugePage; }
   static size_t mappingBytes(size_t bytes) {
-    const size_t unit = bytes >= kHugePage ? kHugePage : kPage;
+    const size_t unit = huge(bytes) ? kHugePage : kPage;
     return (bytes + unit - 1) / unit * unit;
   }
   size_t mappedBytes() const { return mappingBytes(capacity_ * sizeof(T)); }
 
   static void* mapAligned(size_t bytes) {
-    const size_t slack = bytes >= kHugePage ? kHugePage : 0;
+    const size_t slack = huge(bytes) ? kHugePage : 0;
     void* p = ::mmap(nullptr, bytes + slack, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (p == MAP_FAILED) throw std::bad_alloc();
     if (slack == 0) return p;
@@ -115,7 +118,7 @@ class MappedArray {
   void* grow(size_t bytes) {
     const size_t old_bytes = mappedBytes();
     const bool aligned = reinterpret_cast<uintptr_t>(data_) % kHugePage == 0;
-    if (aligned || bytes < kHugePage) {
+    if (aligned || !huge(bytes)) {
       void* p = ::mremap(data_, old_bytes, bytes, 0);
       if (p != MAP_FAILED) return p;
     }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <unordered_map>
 #include <vector>
@@ -76,17 +77,20 @@ struct ProbeCounters {
 // caller (KeyframeDatabase, SparseMatcher), which is what lets a candidate be rejected on its first
 // 64 bits without touching the rest.
 //
-// Layout, per table. Buckets are slots: the substring value itself for substrings up to 20 bits
-// (every slot preallocated), or a slot number handed out on first use for longer substrings.
-// Settled entries sit in one contiguous array, bucket after bucket (compressed sparse rows), so a
-// probe reads a bucket's ids in one sequential run. Each run is followed by free room (roomAfter:
-// an eighth of its length plus one, left by the last merge), where new entries of that bucket go;
-// once it is full they sit in per-bucket chains. When the chains of a table hold more than 1/64 of
-// its settled entries they are merged into the array: each entry is copied a bounded number of
-// times over its life, and no bucket carries the 24-byte header of a vector of its own. A merge
-// shifts the runs within the array (whose capacity keeps a further eighth spare), so that it
-// neither allocates nor clears a new array of every entry (README "Insert time", "Room after each
-// run").
+// Layout, per table. A table's buckets are split into shards (16 for 16-bit substrings: by their
+// top 4 bits), each with arrays of its own. Buckets are slots: the substring's low bits for
+// substrings up to 20 bits (every slot preallocated), or a slot number handed out on first use for
+// longer substrings. Settled entries sit in one contiguous array per shard, bucket after bucket
+// (compressed sparse rows), so a probe reads a bucket's ids in one sequential run. Each run is
+// followed by free room (roomAfter: an eighth of its length plus one, left by the last merge), where
+// new entries of that bucket go; once it is full they sit in per-bucket chains. When the chains of a
+// shard hold more than 1/64 of its settled entries they are merged into its array: each entry is
+// copied a bounded number of times over its life, and no bucket carries the 24-byte header of a
+// vector of its own. A merge shifts the runs within the array (whose capacity keeps a further
+// eighth spare), so that it neither allocates nor clears a new array of every entry. Shards due for
+// a merge wait in a queue, and an insertion merges a bounded number of entries from it: the
+// slowest insertion moves one shard, not a table (README "Insert time", "Room after each run",
+// "Bounded insert time").
 class MihIndex {
  public:
   // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit
@@ -128,6 +132,8 @@ class MihIndex {
   bool meetsInTable(const Descriptor& a, const Descriptor& b, int t) const;
 
   size_t entryCount() const { return entry_count_; }
+  // Entries waiting in chains for their shard's merge (each costs a dependent read at query time).
+  size_t chainedEntries() const;
   size_t discardedBuckets() const { return discarded_buckets_; }
   uint64_t evictedEntries() const { return evicted_entries_; }
   size_t memoryBytes() const;
@@ -153,22 +159,43 @@ class MihIndex {
     uint32_t recent;
     uint32_t count;
   };
-  struct Table {
-    bool dense = true;
+  // One range of a table's buckets with arrays of its own, so that a merge moves one shard's
+  // entries, not the table's (README "Bounded insert time").
+  struct Shard {
     std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
     std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
-    MappedArray<FeatureId> ids;                      // settled entries, bucket after bucket
-    MappedArray<uint64_t> prefixes;                  // beside ids (inline_prefixes), else empty
+    // 4 KB pages: a shard's array is a few megabytes at most (bounded buckets), and rounding each of
+    // them up to 2 MB pages cost more memory than the pages save time (README "Bounded insert time").
+    MappedArray<FeatureId, false> ids;      // settled entries, bucket after bucket
+    MappedArray<uint64_t, false> prefixes;  // beside ids (inline_prefixes), else empty
     std::vector<Link> recent;
-    size_t entries = 0;
-    uint32_t stagger = 0;  // spreads the tables' merges over different keyframes (mergeThreshold)
+    uint32_t merge_floor = 0;  // mergeThreshold's least number of recent entries
+    uint32_t stagger = 0;      // spreads the shards' merges over different keyframes (mergeThreshold)
+    bool queued = false;       // waits in merge_queue_
 
-    uint32_t find(uint64_t key) const;
-    uint32_t findOrAdd(uint64_t key);
+    uint32_t find(bool dense, uint64_t key) const;
+    uint32_t findOrAdd(bool dense, uint64_t key);
+  };
+  struct Table {
+    bool dense = true;
+    int shard_bits = 0;  // 2^shard_bits shards
+    int slot_bits = 0;   // dense: the low slot_bits of a substring are its slot in its shard
+    std::vector<Shard> shards;
+
+    // The shard holding a substring's bucket, and the substring as that shard knows it.
+    size_t shardOf(uint64_t key) const {
+      if (shard_bits == 0) return 0;
+      return dense ? key >> slot_bits : (key * 0x9E3779B97F4A7C15ull) >> (64 - shard_bits);
+    }
+    uint64_t keyInShard(uint64_t key) const { return dense ? key & ((uint64_t{1} << slot_bits) - 1) : key; }
+  };
+  struct ShardRef {
+    uint16_t table;
+    uint16_t shard;
   };
 
   size_t bucketCap(int t) const;
-  // Calls found(table, slot, t) for every existing bucket within radius r of q's substrings, its
+  // Calls found(shard, slot, t) for every existing bucket within radius r of q's substrings, its
   // slot already requested from memory.
   template <class Found>
   void forEachProbedBucket(const Descriptor& q, ProbeCounters& counters, Found&& found) const;
@@ -176,14 +203,18 @@ class MihIndex {
   void probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
   template <bool kPrefixes, class Visit>
   void probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
-  void merge(Table& table);
+  void merge(Shard& shard);
+  // Merges the shards waiting in merge_queue_, oldest first, up to kMergeBudget entries moved (at
+  // least one shard); all of them while merges are deferred.
+  void mergeQueued();
   static uint32_t roomAfter(uint32_t entries);  // free entries a merge leaves after a run of `entries`
-  size_t slotCount(const Table& table) const { return table.slots.size() - 1; }
-  static size_t mergeThreshold(const Table& table);
+  static size_t slotCount(const Shard& shard) { return shard.slots.size() - 1; }
+  static size_t mergeThreshold(const Shard& shard);
 
   MihParams params_;
   SubstringLayout layout_;
   std::vector<Table> tables_;
+  std::deque<ShardRef> merge_queue_;  // shards whose chains passed their threshold, oldest first
   // XOR masks with popcount <= r, per substring length (index = length).
   std::vector<std::vector<uint64_t>> probe_masks_;
   uint32_t query_budget_ = 0;  // max_candidates_per_feature scaled to the table count
@@ -229,10 +260,12 @@ void MihIndex::forEachProbedBucket(const Descriptor& q, ProbeCounters& counters,
     const Table& table = tables_[t];
     for (uint64_t flip : probe_masks_[layout_.length(t)]) {
       ++counters.buckets_probed;
-      const uint32_t slot = table.find(key ^ flip);
+      const uint64_t probed = key ^ flip;
+      const Shard& shard = table.shards[table.shardOf(probed)];
+      const uint32_t slot = shard.find(table.dense, table.keyInShard(probed));
       if (slot == kNone) continue;
-      __builtin_prefetch(&table.slots[slot]);
-      found(table, slot, t);
+      __builtin_prefetch(&shard.slots[slot]);
+      found(shard, slot, t);
     }
   }
 }
@@ -247,7 +280,7 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
   // so that the loads overlap instead of following one another.
   constexpr size_t kBatch = 64;
   struct Pending {
-    const Table* table;
+    const Shard* shard;
     uint32_t slot;
     int t;
   };
@@ -255,26 +288,26 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
   size_t pending = 0;
   const auto drain = [&] {
     for (size_t i = 0; i < pending; ++i) {
-      const Slot& s = batch[i].table->slots[batch[i].slot];
-      __builtin_prefetch(batch[i].table->ids.data() + s.offset);
-      if constexpr (kPrefixes) __builtin_prefetch(batch[i].table->prefixes.data() + s.offset);
+      const Slot& s = batch[i].shard->slots[batch[i].slot];
+      __builtin_prefetch(batch[i].shard->ids.data() + s.offset);
+      if constexpr (kPrefixes) __builtin_prefetch(batch[i].shard->prefixes.data() + s.offset);
     }
     for (size_t i = 0; i < pending; ++i) {
-      const Table& table = *batch[i].table;
-      const Slot& s = table.slots[batch[i].slot];
+      const Shard& shard = *batch[i].shard;
+      const Slot& s = shard.slots[batch[i].slot];
       if (s.recent == kDiscarded) continue;
       const uint32_t begin = s.offset, end = s.end;
-      const FeatureId* ids = table.ids.data();
+      const FeatureId* ids = shard.ids.data();
       for (uint32_t e = begin; e != end && ids[e] < id_limit; ++e) {  // settled ids ascend within a bucket
         ++counters.entries_visited;
         if constexpr (kPrefixes) {
-          visit(ids[e], table.prefixes[e], batch[i].t);
+          visit(ids[e], shard.prefixes[e], batch[i].t);
         } else {
           visit(ids[e], uint64_t{0}, batch[i].t);
         }
       }
-      for (uint32_t link = s.recent; link != kNone; link = table.recent[link].next) {
-        const Link& l = table.recent[link];
+      for (uint32_t link = s.recent; link != kNone; link = shard.recent[link].next) {
+        const Link& l = shard.recent[link];
         if (l.id >= id_limit) continue;  // recent ids descend: newest first
         ++counters.entries_visited;
         visit(l.id, l.prefix, batch[i].t);
@@ -282,8 +315,8 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
     }
     pending = 0;
   };
-  forEachProbedBucket(q, counters, [&](const Table& table, uint32_t slot, int t) {
-    batch[pending++] = {&table, slot, t};
+  forEachProbedBucket(q, counters, [&](const Shard& shard, uint32_t slot, int t) {
+    batch[pending++] = {&shard, slot, t};
     if (pending == kBatch) drain();
   });
   drain();
@@ -298,39 +331,42 @@ void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeC
     uint32_t length;
     uint32_t slot;
     int t;
+    const Shard* shard;
   };
   thread_local std::vector<Bucket> buckets;
   buckets.clear();
-  forEachProbedBucket(q, counters, [](const Table&, uint32_t slot, int t) { buckets.push_back({0, slot, t}); });
+  forEachProbedBucket(q, counters, [](const Shard& shard, uint32_t slot, int t) {
+    buckets.push_back({0, slot, t, &shard});
+  });
   uint64_t total = 0;
   for (Bucket& b : buckets) {
-    const Table& table = tables_[b.t];
-    const Slot& s = table.slots[b.slot];
+    const Shard& shard = *b.shard;
+    const Slot& s = shard.slots[b.slot];
     b.length = s.recent == kDiscarded ? 0 : s.count;
     total += b.length;
     if (b.length > 0 && s.end > s.offset) {
-      __builtin_prefetch(table.ids.data() + s.end - 1);  // read newest first, from the run's end
-      if constexpr (kPrefixes) __builtin_prefetch(table.prefixes.data() + s.end - 1);
+      __builtin_prefetch(shard.ids.data() + s.end - 1);  // read newest first, from the run's end
+      if constexpr (kPrefixes) __builtin_prefetch(shard.prefixes.data() + s.end - 1);
     }
   }
   uint32_t budget = query_budget_;
   const auto read = [&](const Bucket& b) {
-    const Table& table = tables_[b.t];
-    const Slot& s = table.slots[b.slot];
-    for (uint32_t link = s.recent; link != kNone && budget > 0; link = table.recent[link].next) {
-      const Link& l = table.recent[link];
+    const Shard& shard = *b.shard;
+    const Slot& s = shard.slots[b.slot];
+    for (uint32_t link = s.recent; link != kNone && budget > 0; link = shard.recent[link].next) {
+      const Link& l = shard.recent[link];
       if (l.id >= id_limit) continue;  // recent ids descend: newest first
       ++counters.entries_visited;
       --budget;
       visit(l.id, l.prefix, b.t);
     }
-    const FeatureId* ids = table.ids.data();
+    const FeatureId* ids = shard.ids.data();
     uint32_t e = s.end;
     while (e != s.offset && ids[e - 1] >= id_limit) --e;  // settled ids ascend within a bucket
     for (; e != s.offset && budget > 0; --e, --budget) {
       ++counters.entries_visited;
       if constexpr (kPrefixes) {
-        visit(ids[e - 1], table.prefixes[e - 1], b.t);
+        visit(ids[e - 1], shard.prefixes[e - 1], b.t);
       } else {
         visit(ids[e - 1], uint64_t{0}, b.t);
       }

@@ -14,26 +14,39 @@ namespace {
 // longer ones a hash map.
 constexpr int kMaxDenseBits = 20;
 
+// A table's buckets are split into 2^kShardBits shards (64: a merge moves 1/64 of a table), directly
+// addressed ones only while a shard keeps at least 2^kMinShardSlotBits of them, so that a merge's
+// passes over its slots stay small against its entries. 16 shards of a 10,000-keyframe map still
+// took 3 ms to merge one; 256 made inserts and queries slower (4,096 shard headers, 600 KB, no longer
+// stay in cache, and every probed bucket reads one).
+constexpr int kShardBits = 6;
+constexpr int kMinShardSlotBits = 10;
+
+// What an insertion spends on queued merges beyond the first shard, in entries moved plus eight per
+// bucket slot (a merge's passes over them): up to about a millisecond here. Shards that do not fit
+// wait, their new entries in chains, for the next insertions.
+constexpr size_t kMergeBudget = size_t{1} << 17;
+
 }  // namespace
 
-size_t MihIndex::mergeThreshold(const Table& table) {
+size_t MihIndex::mergeThreshold(const Shard& shard) {
   // Recent entries cost a dependent load each at query time; 1/64 of the settled ones keeps them
   // rare. A merge moves every run, so without the room after each run (roomAfter) each entry was
   // copied about 64 times over its life; most new entries now land in that room instead. Measured on
   // the public sequences: a floor of 2,048 or 16,384 instead of 4,096 is slower (more merges, or
-  // more chains). The tables grow alike, so with one threshold all of them merged in the same
-  // keyframe, which then paid for 16 merges at once: table t waits for (16 + t % 16) / 16 of it,
+  // more chains); that floor is per table, shared by its shards. The shards grow alike, so with one
+  // threshold all of them came due in the same keyframe: shard i waits for (16 + i % 16) / 16 of it,
   // and their merges drift apart.
-  return std::max<size_t>(4096, table.ids.size() / 64) * (16 + table.stagger) / 16;
+  return std::max<size_t>(shard.merge_floor, shard.ids.size() / 64) * (16 + shard.stagger) / 16;
 }
 
-uint32_t MihIndex::Table::find(uint64_t key) const {
+uint32_t MihIndex::Shard::find(bool dense, uint64_t key) const {
   if (dense) return static_cast<uint32_t>(key);
   auto it = slot_of.find(key);
   return it == slot_of.end() ? kNone : it->second;
 }
 
-uint32_t MihIndex::Table::findOrAdd(uint64_t key) {
+uint32_t MihIndex::Shard::findOrAdd(bool dense, uint64_t key) {
   if (dense) return static_cast<uint32_t>(key);
   auto [it, added] = slot_of.emplace(key, static_cast<uint32_t>(slots.size() - 1));
   if (added) {  // before the end sentinel, an empty run
@@ -56,11 +69,20 @@ void MihIndex::clear() {
   tables_.resize(layout_.count());
   for (int t = 0; t < layout_.count(); ++t) {
     Table& table = tables_[t];
-    table.stagger = static_cast<uint32_t>(t % 16);
-    table.dense = layout_.length(t) <= kMaxDenseBits;
-    const size_t slots = table.dense ? size_t{1} << layout_.length(t) : 0;
-    table.slots.assign(slots + 1, Slot{0, 0, kNone, 0});
+    const int length = layout_.length(t);
+    table.dense = length <= kMaxDenseBits;
+    table.shard_bits = table.dense ? std::clamp(length - kMinShardSlotBits, 0, kShardBits) : kShardBits;
+    table.slot_bits = table.dense ? length - table.shard_bits : 0;
+    table.shards.resize(size_t{1} << table.shard_bits);
+    const size_t slots = table.dense ? size_t{1} << table.slot_bits : 0;
+    for (size_t i = 0; i < table.shards.size(); ++i) {
+      Shard& shard = table.shards[i];
+      shard.merge_floor = static_cast<uint32_t>(4096 >> table.shard_bits);
+      shard.stagger = static_cast<uint32_t>((t + i) % 16);
+      shard.slots.assign(slots + 1, Slot{0, 0, kNone, 0});
+    }
   }
+  merge_queue_.clear();
   entry_count_ = 0;
   discarded_buckets_ = 0;
   features_seen_ = 0;
@@ -100,17 +122,20 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
     for (size_t i = 0; i < count; ++i) keys_[i] = layout_.key(descriptors[i], t);
     constexpr size_t kAhead = 8;  // buckets are scattered: request them a few features ahead
     for (size_t i = 0; i < count; ++i) {
-      if (table.dense && i + kAhead < count) __builtin_prefetch(&table.slots[keys_[i + kAhead]]);
+      if (table.dense && i + kAhead < count) {
+        const uint64_t ahead = keys_[i + kAhead];
+        __builtin_prefetch(&table.shards[table.shardOf(ahead)].slots[table.keyInShard(ahead)]);
+      }
       const uint64_t key = keys_[i];
       // Intra-image burstiness: the keyframe's first feature in a bucket is its only entry there.
       if (!firstInKeyframe(key)) continue;
-      const uint32_t s = table.findOrAdd(key);
-      Slot& slot = table.slots[s];
+      Shard& shard = table.shards[table.shardOf(key)];
+      const uint32_t s = shard.findOrAdd(table.dense, table.keyInShard(key));
+      Slot& slot = shard.slots[s];
       if (slot.recent == kDiscarded) continue;
       if (params_.cap_buckets && slot.count >= cap) {
         // Discarded: ignored from now on; its entries leave memory at the next merge.
         entry_count_ -= slot.count;
-        table.entries -= slot.count;
         slot.count = 0;
         slot.recent = kDiscarded;
         ++discarded_buckets_;
@@ -123,31 +148,56 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
         ++evicted_entries_;
       }
       const FeatureId id = first_id + static_cast<FeatureId>(i);
-      if (slot.recent == kNone && slot.end < table.slots[s + 1].offset) {
+      if (slot.recent == kNone && slot.end < shard.slots[s + 1].offset) {
         // Room the last merge left after the run: the entry joins it, and is read with it.
-        if (params_.inline_prefixes) table.prefixes[slot.end] = descriptors[i].words[0];
-        table.ids[slot.end++] = id;
+        if (params_.inline_prefixes) shard.prefixes[slot.end] = descriptors[i].words[0];
+        shard.ids[slot.end++] = id;
       } else {
-        table.recent.push_back({id, slot.recent, s, descriptors[i].words[0]});
-        slot.recent = static_cast<uint32_t>(table.recent.size() - 1);
+        shard.recent.push_back({id, slot.recent, s, descriptors[i].words[0]});
+        slot.recent = static_cast<uint32_t>(shard.recent.size() - 1);
       }
       if (evict) continue;
       ++slot.count;
-      ++table.entries;
       ++entry_count_;
     }
     // Bulk loading merges rarely (each entry is copied a few times instead of ~64), live insertion
     // often (recent entries are slower to probe).
-    const size_t threshold = merges_deferred_ ? std::max<size_t>(1 << 16, table.ids.size() / 4) : mergeThreshold(table);
-    if (table.recent.size() > threshold) merge(table);
+    for (size_t i = 0; i < table.shards.size(); ++i) {
+      Shard& shard = table.shards[i];
+      const size_t threshold = merges_deferred_
+                                   ? std::max<size_t>(size_t{1} << (16 - table.shard_bits), shard.ids.size() / 4)
+                                   : mergeThreshold(shard);
+      if (!shard.queued && shard.recent.size() > threshold) {
+        shard.queued = true;
+        merge_queue_.push_back({static_cast<uint16_t>(t), static_cast<uint16_t>(i)});
+      }
+    }
+  }
+  mergeQueued();
+}
+
+void MihIndex::mergeQueued() {
+  size_t moved = 0;
+  while (!merge_queue_.empty()) {
+    Shard& shard = tables_[merge_queue_.front().table].shards[merge_queue_.front().shard];
+    const size_t cost = shard.ids.size() + shard.recent.size() + 8 * slotCount(shard);
+    if (!merges_deferred_ && moved > 0 && moved + cost > kMergeBudget) break;
+    merge_queue_.pop_front();
+    shard.queued = false;
+    merge(shard);
+    moved += cost;
   }
 }
 
 void MihIndex::deferMerges(bool defer) {
   merges_deferred_ = defer;
   if (!defer) {
+    merge_queue_.clear();
     for (Table& table : tables_) {
-      if (!table.recent.empty()) merge(table);
+      for (Shard& shard : table.shards) {
+        shard.queued = false;
+        if (!shard.recent.empty()) merge(shard);
+      }
     }
   }
 }
@@ -178,11 +228,11 @@ uint32_t MihIndex::roomAfter(uint32_t entries) {
   return entries / 8 + 1;
 }
 
-void MihIndex::merge(Table& table) {
+void MihIndex::merge(Shard& shard) {
   // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
   // ids, so scattering them in that order keeps every bucket's ids ascending. Every pass over the
-  // buckets is sequential, through plain pointers (a merge visits all 65,536 buckets of a table).
-  const size_t slots = slotCount(table);
+  // buckets is sequential, through plain pointers (a merge visits all 4,096 buckets of a shard).
+  const size_t slots = slotCount(shard);
   const uint32_t bound = params_.max_bucket_entries;
   MergeScratch& scratch = merge_scratch_;
   scratch.start.resize(slots + 1);
@@ -195,8 +245,8 @@ void MihIndex::merge(Table& table) {
   uint32_t* const from = scratch.from.data();
   uint32_t* const kept = scratch.kept.data();
   uint32_t* const skip_recent = scratch.skip_recent.data();
-  Slot* const slot_at = table.slots.data();
-  for (const Link& link : table.recent) ++recent_in[link.slot];  // discarded buckets: ignored below
+  Slot* const slot_at = shard.slots.data();
+  for (const Link& link : shard.recent) ++recent_in[link.slot];  // discarded buckets: ignored below
   // Each bucket's settled entries that stay: from[s] .. from[s] + kept[s] in the array. Over the
   // bound (max_bucket_entries) a bucket's oldest entries go, settled ones first. Its offset becomes
   // its write cursor for the recent entries.
@@ -224,22 +274,21 @@ void MihIndex::merge(Table& table) {
     slot.offset = start[s] + settled;
   }
   evicted_entries_ += evicted;
-  table.entries -= evicted;
   entry_count_ -= evicted;
   const size_t total = start[slots];
   const bool prefixes = params_.inline_prefixes;
   // Past the spare room an array grows by an eighth more (its mapping is extended, not copied), and
   // the runs move within it as below. Each array on its own: their capacities are rounded to pages
   // of different numbers of elements.
-  if (total > table.ids.capacity()) table.ids.reserve(total + total / 8);
-  if (prefixes && total > table.prefixes.capacity()) table.prefixes.reserve(total + total / 8);
-  shiftRuns(table.ids.data(), from, kept, start, slots);
-  if (prefixes) shiftRuns(table.prefixes.data(), from, kept, start, slots);
-  table.ids.resize(total);  // shrinks after discards or evictions; the room stays
-  if (prefixes) table.prefixes.resize(total);
-  FeatureId* const ids = table.ids.data();
-  uint64_t* const prefix_at = prefixes ? table.prefixes.data() : nullptr;
-  for (const Link& link : table.recent) {
+  if (total > shard.ids.capacity()) shard.ids.reserve(total + total / 64);
+  if (prefixes && total > shard.prefixes.capacity()) shard.prefixes.reserve(total + total / 64);
+  shiftRuns(shard.ids.data(), from, kept, start, slots);
+  if (prefixes) shiftRuns(shard.prefixes.data(), from, kept, start, slots);
+  shard.ids.resize(total);  // shrinks after discards or evictions; the room stays
+  if (prefixes) shard.prefixes.resize(total);
+  FeatureId* const ids = shard.ids.data();
+  uint64_t* const prefix_at = prefixes ? shard.prefixes.data() : nullptr;
+  for (const Link& link : shard.recent) {
     Slot& slot = slot_at[link.slot];
     if (slot.recent == kDiscarded) continue;
     if (bound > 0 && skip_recent[link.slot] > 0) {
@@ -259,10 +308,18 @@ void MihIndex::merge(Table& table) {
     }
   }
   slot_at[slots].offset = slot_at[slots].end = start[slots];
-  table.recent.clear();
-  if (table.recent.capacity() > 2 * mergeThreshold(table)) {  // after a bulk load: give the room back
-    std::vector<Link>().swap(table.recent);
+  shard.recent.clear();
+  if (shard.recent.capacity() > 2 * mergeThreshold(shard)) {  // after a bulk load: give the room back
+    std::vector<Link>().swap(shard.recent);
   }
+}
+
+size_t MihIndex::chainedEntries() const {
+  size_t chained = 0;
+  for (const Table& table : tables_) {
+    for (const Shard& shard : table.shards) chained += shard.recent.size();
+  }
+  return chained;
 }
 
 bool MihIndex::meetsInTable(const Descriptor& a, const Descriptor& b, int t) const {
@@ -275,12 +332,16 @@ size_t MihIndex::memoryBytes() const {
   bytes +=
       (m.start.capacity() + m.recent_in.capacity() + m.from.capacity() + m.kept.capacity() + m.skip_recent.capacity()) *
       sizeof(uint32_t);
+  bytes += merge_queue_.size() * sizeof(ShardRef);
   for (const Table& table : tables_) {
-    bytes += sizeof(Table) + table.slots.capacity() * sizeof(Slot) + table.ids.capacity() * sizeof(FeatureId) +
-             table.prefixes.capacity() * sizeof(uint64_t) + table.recent.capacity() * sizeof(Link);
-    // unordered_map nodes: key, value, next pointer and cached hash, plus one bucket pointer each
-    bytes += table.slot_of.size() * (sizeof(uint64_t) + sizeof(uint32_t) + 2 * sizeof(void*)) +
-             table.slot_of.bucket_count() * sizeof(void*);
+    bytes += sizeof(Table);
+    for (const Shard& shard : table.shards) {
+      bytes += sizeof(Shard) + shard.slots.capacity() * sizeof(Slot) + shard.ids.capacity() * sizeof(FeatureId) +
+               shard.prefixes.capacity() * sizeof(uint64_t) + shard.recent.capacity() * sizeof(Link);
+      // unordered_map nodes: key, value, next pointer and cached hash, plus one bucket pointer each
+      bytes += shard.slot_of.size() * (sizeof(uint64_t) + sizeof(uint32_t) + 2 * sizeof(void*)) +
+               shard.slot_of.bucket_count() * sizeof(void*);
+    }
   }
   return bytes;
 }
