@@ -77,8 +77,8 @@ struct ProbeCounters {
 // caller (KeyframeDatabase, SparseMatcher), which is what lets a candidate be rejected on its first
 // 64 bits without touching the rest.
 //
-// Layout, per table. A table's buckets are split into shards (16 for 16-bit substrings: by their
-// top 4 bits), each with arrays of its own. Buckets are slots: the substring's low bits for
+// Layout, per table. A table's buckets are split into shards (64 for 16-bit substrings: by their
+// top 6 bits), each with arrays of its own. Buckets are slots: the substring's low bits for
 // substrings up to 20 bits (every slot preallocated), or a slot number handed out on first use for
 // longer substrings. Settled entries sit in one contiguous array per shard, bucket after bucket
 // (compressed sparse rows), so a probe reads a bucket's ids in one sequential run. Each run is
@@ -86,11 +86,11 @@ struct ProbeCounters {
 // new entries of that bucket go; once it is full they sit in per-bucket chains. When the chains of a
 // shard hold more than 1/64 of its settled entries they are merged into its array: each entry is
 // copied a bounded number of times over its life, and no bucket carries the 24-byte header of a
-// vector of its own. A merge shifts the runs within the array (whose capacity keeps a further
-// eighth spare), so that it neither allocates nor clears a new array of every entry. Shards due for
-// a merge wait in a queue, and an insertion merges a bounded number of entries from it: the
-// slowest insertion moves one shard, not a table (README "Insert time", "Room after each run",
-// "Bounded insert time").
+// vector of its own. A merge shifts the runs within the array (which grows by remapping, a 64th at
+// a time), so that it neither allocates nor clears a new array of every entry. Shards due for a
+// merge wait in a queue, and an insertion merges from it within a budget (at least one shard): no
+// insertion moves a whole table (README "Insert time", "Room after each run", "Bounded insert
+// time").
 class MihIndex {
  public:
   // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit
@@ -165,7 +165,8 @@ class MihIndex {
     std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
     std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
     // 4 KB pages: a shard's array is a few megabytes at most (bounded buckets), and rounding each of
-    // them up to 2 MB pages cost more memory than the pages save time (README "Bounded insert time").
+    // 1,024 of them up to 2 MB pages costs memory (16 shards with huge pages: +17 bytes per feature at
+    // 10,000 keyframes; README "Bounded insert time").
     MappedArray<FeatureId, false> ids;      // settled entries, bucket after bucket
     MappedArray<uint64_t, false> prefixes;  // beside ids (inline_prefixes), else empty
     std::vector<Link> recent;

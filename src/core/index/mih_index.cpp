@@ -277,9 +277,9 @@ void MihIndex::merge(Shard& shard) {
   entry_count_ -= evicted;
   const size_t total = start[slots];
   const bool prefixes = params_.inline_prefixes;
-  // Past the spare room an array grows by an eighth more (its mapping is extended, not copied), and
-  // the runs move within it as below. Each array on its own: their capacities are rounded to pages
-  // of different numbers of elements.
+  // Past its capacity an array grows by a 64th more (its mapping is extended, not copied: growing is
+  // cheap, and spare capacity is memory), and the runs move within it as below. Each array on its own: their capacities
+  // are rounded to pages of different numbers of elements.
   if (total > shard.ids.capacity()) shard.ids.reserve(total + total / 64);
   if (prefixes && total > shard.prefixes.capacity()) shard.prefixes.reserve(total + total / 64);
   shiftRuns(shard.ids.data(), from, kept, start, slots);
