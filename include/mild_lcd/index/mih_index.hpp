@@ -88,9 +88,9 @@ struct ProbeCounters {
 // copied a bounded number of times over its life, and no bucket carries the 24-byte header of a
 // vector of its own. A merge shifts the runs within the array (which grows by remapping, a 64th at
 // a time), so that it neither allocates nor clears a new array of every entry. Shards due for a
-// merge wait in a queue, and an insertion merges from it within a budget (at least one shard): no
-// insertion moves a whole table (README "Insert time", "Room after each run", "Bounded insert
-// time").
+// merge wait in a queue, and an insertion merges from it within a budget (at least one shard, and
+// beyond the budget while more than 64 wait): no insertion moves a whole table (README "Insert
+// time", "Room after each run", "Bounded insert time").
 class MihIndex {
  public:
   // An index over descriptors of `bits` bits. Throws InvalidInput when the parameters do not fit
