@@ -39,7 +39,7 @@ size_t MihIndex::mergeThreshold(const Shard& shard) {
   // copied about 64 times over its life; most new entries now land in that room instead. Measured on
   // the public sequences: a floor of 2,048 or 16,384 instead of 4,096 is slower (more merges, or
   // more chains); that floor is per table, shared by its shards. The shards grow alike, so with one
-  // threshold all of them came due in the same keyframe: shard i waits for (16 + i % 16) / 16 of it,
+  // threshold all of them came due in the same keyframe: shard i of table t waits for (16 + (t + i) % 16) / 16 of it,
   // and their merges drift apart.
   return std::max<size_t>(shard.merge_floor, shard.ids.size() / 64) * (16 + shard.stagger) / 16;
 }
@@ -236,7 +236,7 @@ uint32_t MihIndex::roomAfter(uint32_t entries) {
 void MihIndex::merge(Shard& shard) {
   // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
   // ids, so scattering them in that order keeps every bucket's ids ascending. Every pass over the
-  // buckets is sequential, through plain pointers (a merge visits all 4,096 buckets of a shard).
+  // buckets is sequential, through plain pointers (a merge visits all 1,024 buckets of a shard).
   const size_t slots = slotCount(shard);
   const uint32_t bound = params_.max_bucket_entries;
   MergeScratch& scratch = merge_scratch_;
