@@ -37,14 +37,15 @@ class Monitor:
         self.duration = float(rospy.get_param("~duration", 600))
         self.period = float(rospy.get_param("~period", 5))
         self.report_path = rospy.get_param("~report", "")
-        self.answers = []   # (wall time, query_ms, database_size)
+        self.answers = []   # (wall time, query_ms, database_size, extract_ms, filter_ms, verify_ms)
         self.diag = {}
         self.samples = []   # (wall time, rss, database size, queue depth, dropped)
         rospy.Subscriber("loop_closure", LoopClosure, self.on_answer, queue_size=1000)
         rospy.Subscriber("/diagnostics", DiagnosticArray, self.on_diagnostics, queue_size=10)
 
     def on_answer(self, msg):
-        self.answers.append((time.monotonic(), msg.query_ms, msg.database_size))
+        self.answers.append((time.monotonic(), msg.query_ms, msg.database_size, msg.extract_ms, msg.filter_ms,
+                             msg.verify_ms))
 
     def on_diagnostics(self, msg):
         for status in msg.status:
@@ -64,8 +65,8 @@ class Monitor:
         if len(self.answers) < 2 or len(self.samples) < 3:
             return {"error": "too few answers or samples"}
         elapsed = self.answers[-1][0] - self.answers[0][0]
-        first = [q for t, q, _ in self.answers if t - start < 60]
-        last = [q for t, q, _ in self.answers if t - start > self.duration - 60]
+        first = [a[1] for a in self.answers if a[0] - start < 60]
+        last = [a[1] for a in self.answers if a[0] - start > self.duration - 60]
         grown = [(s[2], s[1]) for s in self.samples if s[2] > 0]
         report = {
             "duration_s": round(self.duration),
@@ -86,7 +87,37 @@ class Monitor:
         }
         if report["query_ms_first_minute"] and report["query_ms_last_minute"]:
             report["query_ms_drift"] = round(report["query_ms_last_minute"] - report["query_ms_first_minute"], 2)
+        totals = [a[1] + a[3] + a[4] + a[5] for a in self.answers]
+        report["stages_ms_median"] = self.stage_medians(self.answers)
+        report["keyframe_ms_p99"] = round(sorted(totals)[int(0.99 * (len(totals) - 1))], 2)
+        report["drop_periods"] = self.drop_periods(start)
         return report
+
+    @staticmethod
+    def stage_medians(answers):
+        names = ("query", "extract", "filter", "verify")
+        columns = (1, 3, 4, 5)
+        out = {name: round(statistics.median(a[c] for a in answers), 2) for name, c in zip(names, columns)}
+        out["total"] = round(statistics.median(a[1] + a[3] + a[4] + a[5] for a in answers), 2)
+        return out
+
+    def drop_periods(self, start):
+        """Sampling periods whose dropped count rose, with the stage times of the keyframes answered
+        in the 10 s before the period ended (a keyframe is answered well after it arrives when the
+        queue is full, so these are the keyframes that were in the way)."""
+        periods = []
+        for before, now in zip(self.samples, self.samples[1:]):
+            if now[4] <= before[4]:
+                continue
+            window = [a for a in self.answers if now[0] - 10 <= a[0] - start <= now[0]]
+            periods.append({
+                "at_s": round(now[0]),
+                "dropped": now[4] - before[4],
+                "database_keyframes": now[2],
+                "keyframes_answered_per_s": round(len(window) / 10, 1),
+                "stages_ms_median": self.stage_medians(window) if window else None,
+            })
+        return periods
 
 
 def main():

@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <limits>
+#include <random>
+#include <tuple>
 
 #include <filesystem>
 #include <set>
@@ -339,6 +341,55 @@ TEST(LoopDetector, ResetForgetsEverything) {
   EXPECT_EQ(detector.database().size(), 0u);
   EXPECT_FALSE(detector.find(100));
   EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
+}
+
+}  // namespace
+}  // namespace mild
+
+namespace mild {
+namespace {
+
+// What separatedBest must equal: every keyframe sorted, then the greedy walk.
+std::vector<KeyframeIndex> separatedBestByFullSort(const std::vector<double>& belief,
+                                                   const std::vector<double>& similarity, size_t max_count,
+                                                   KeyframeIndex radius) {
+  std::vector<KeyframeIndex> order(belief.size());
+  for (KeyframeIndex j = 0; j < order.size(); ++j) order[j] = j;
+  std::sort(order.begin(), order.end(), [&](KeyframeIndex a, KeyframeIndex b) {
+    return std::make_tuple(-belief[a], -similarity[a], a) < std::make_tuple(-belief[b], -similarity[b], b);
+  });
+  std::vector<KeyframeIndex> out;
+  for (KeyframeIndex j : order) {
+    if (out.size() >= max_count || belief[j] <= 0.0) break;
+    bool near = false;
+    for (KeyframeIndex t : out) near = near || (t > j ? t - j : j - t) <= radius;
+    if (!near) out.push_back(j);
+  }
+  return out;
+}
+
+TEST(SeparatedBest, EqualsTheGreedyWalkOverAFullSort) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> level(0, 9);  // few levels: many ties in belief and similarity
+  for (int trial = 0; trial < 200; ++trial) {
+    const size_t n = 1 + rng() % 3000;
+    std::vector<double> belief(n), similarity(n);
+    for (size_t j = 0; j < n; ++j) {
+      belief[j] = level(rng) < 2 ? 0.0 : level(rng) / 10.0;
+      similarity[j] = level(rng);
+    }
+    // Radii up to several hundred keyframes suppress far more than the first sorted batch holds.
+    const KeyframeIndex radius = static_cast<KeyframeIndex>(rng() % 400);
+    const size_t max_count = 1 + rng() % 12;
+    ASSERT_EQ(separatedBest(belief, similarity, max_count, radius),
+              separatedBestByFullSort(belief, similarity, max_count, radius))
+        << "trial " << trial << ", n " << n << ", radius " << radius << ", max " << max_count;
+  }
+}
+
+TEST(SeparatedBest, TakesNothingWithoutBelief) {
+  EXPECT_TRUE(separatedBest({0.0, -1.0, 0.0}, {1.0, 2.0, 3.0}, 3, 0).empty());
+  EXPECT_TRUE(separatedBest({}, {}, 3, 0).empty());
 }
 
 }  // namespace

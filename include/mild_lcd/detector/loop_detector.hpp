@@ -145,6 +145,12 @@ struct PreparedRestore {
 // Sorts candidates best first by probability (stable) and drops those below min_probability.
 void rankCandidates(std::vector<LoopCandidate>& candidates, double min_probability);
 
+// The keyframes a query reports, best first: belief above 0, ordered by belief, then similarity,
+// then the older keyframe; each more than suppression_radius keyframes from every better one taken;
+// at most max_count. Costs O(N) plus a sort of the few it looks at, not of all N keyframes.
+std::vector<KeyframeIndex> separatedBest(const std::vector<double>& belief, const std::vector<double>& similarity,
+                                         size_t max_count, KeyframeIndex suppression_radius);
+
 // Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
 constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
 

@@ -30,6 +30,9 @@ struct QueryStats {
   uint64_t buckets_probed = 0;
   uint64_t candidates_visited = 0;
   uint64_t early_rejections = 0;
+  // Passed early termination but were met already in another table (a close stored feature shares
+  // several substrings with the query feature): compared and voted once.
+  uint64_t repeated_candidates = 0;
   uint64_t full_distances = 0;
   uint64_t votes = 0;
 

@@ -368,22 +368,44 @@ void rankCandidates(std::vector<LoopCandidate>& candidates, double min_probabili
                    candidates.end());
 }
 
+std::vector<KeyframeIndex> separatedBest(const std::vector<double>& belief, const std::vector<double>& similarity,
+                                         size_t max_count, KeyframeIndex suppression_radius) {
+  std::vector<KeyframeIndex> order;
+  for (KeyframeIndex j = 0; j < belief.size(); ++j) {
+    if (belief[j] > 0.0) order.push_back(j);
+  }
+  const auto better = [&](KeyframeIndex a, KeyframeIndex b) {
+    if (belief[a] != belief[b]) return belief[a] > belief[b];
+    if (similarity[a] != similarity[b]) return similarity[a] > similarity[b];
+    return a < b;
+  };
+  // Sorted a batch at a time, as far as the walk gets: sorting every keyframe was most of the
+  // filter stage on large maps (O(N log N) beside the filter's O(N)).
+  constexpr size_t kFirstBatch = 64;
+  size_t sorted = 0;
+  std::vector<KeyframeIndex> out;
+  for (size_t i = 0; i < order.size() && out.size() < max_count; ++i) {
+    if (i == sorted) {
+      sorted = std::min(order.size(), std::max(kFirstBatch, 2 * sorted));
+      std::partial_sort(order.begin() + static_cast<long>(i), order.begin() + static_cast<long>(sorted), order.end(),
+                        better);
+    }
+    const KeyframeIndex j = order[i];
+    const bool suppressed = std::any_of(out.begin(), out.end(), [&](KeyframeIndex taken) {
+      return (taken > j ? taken - j : j - taken) <= suppression_radius;
+    });
+    if (!suppressed) out.push_back(j);
+  }
+  return out;
+}
+
 std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<double>& belief,
                                                           const std::vector<double>& similarity,
                                                           const LoopDetector& map) const {
   const CandidateParams& p = params_.candidates;
-  std::vector<KeyframeIndex> order(belief.size());
-  for (KeyframeIndex j = 0; j < order.size(); ++j) order[j] = j;
-  std::sort(order.begin(), order.end(), [&](KeyframeIndex a, KeyframeIndex b) {
-    return belief[a] != belief[b] ? belief[a] > belief[b] : similarity[a] > similarity[b];
-  });
   std::vector<LoopCandidate> out;
-  for (KeyframeIndex j : order) {
-    if (out.size() >= static_cast<size_t>(p.max_candidates) || belief[j] <= 0.0) break;
-    const bool suppressed = std::any_of(out.begin(), out.end(), [&](const LoopCandidate& c) {
-      return (c.index > j ? c.index - j : j - c.index) <= static_cast<KeyframeIndex>(p.suppression_radius);
-    });
-    if (suppressed) continue;
+  for (KeyframeIndex j : separatedBest(belief, similarity, static_cast<size_t>(p.max_candidates),
+                                       static_cast<KeyframeIndex>(p.suppression_radius))) {
     LoopCandidate c;
     c.index = j;
     c.id = map.records_[j].id;
