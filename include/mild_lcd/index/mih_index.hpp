@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "mild_lcd/common/mapped_array.hpp"
+#include "mild_lcd/common/stamped_set.hpp"
 #include "mild_lcd/common/types.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/substring_layout.hpp"
@@ -224,16 +225,9 @@ class MihIndex {
   uint64_t evicted_entries_ = 0;
   uint64_t features_seen_ = 0;
   bool merges_deferred_ = false;
-  // Substrings the keyframe being inserted already put into the table at hand: a small open-
-  // addressing set, emptied by bumping the generation instead of clearing it.
-  struct Seen {
-    uint64_t key = 0;
-    uint32_t generation = 0;
-  };
-  std::vector<Seen> seen_;
+  // Substrings the keyframe being inserted already put into the table at hand.
+  StampedSet seen_;
   std::vector<uint64_t> keys_;  // the keyframe's substrings for the table at hand
-  uint32_t seen_generation_ = 0;
-  bool firstInKeyframe(uint64_t key);
   // merge()'s per-bucket counts, kept between merges: allocated anew, five arrays of 65,536 counts
   // were faulted in (and zeroed) for every merge (README "Insert time" measures the difference).
   struct MergeScratch {

@@ -98,30 +98,12 @@ size_t MihIndex::bucketCap(int t) const {
   return std::max<size_t>(params_.min_bucket_cap, static_cast<size_t>(params_.bucket_cap_factor * average));
 }
 
-bool MihIndex::firstInKeyframe(uint64_t key) {
-  const size_t mask = seen_.size() - 1;
-  for (size_t h = (key * 0x9E3779B97F4A7C15ull) >> 40 & mask;; h = (h + 1) & mask) {
-    Seen& s = seen_[h];
-    if (s.generation != seen_generation_) {
-      s = {key, seen_generation_};
-      return true;
-    }
-    if (s.key == key) return false;
-  }
-}
-
 void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id) {
   features_seen_ += count;
-  size_t capacity = 1024;
-  while (capacity < 2 * count) capacity *= 2;  // at most half full: short probe sequences
-  if (seen_.size() < capacity) seen_.assign(capacity, Seen{});
   for (int t = 0; t < layout_.count(); ++t) {
     Table& table = tables_[t];
     const size_t cap = bucketCap(t);
-    if (++seen_generation_ == 0) {  // wrapped: old stamps could look current
-      std::fill(seen_.begin(), seen_.end(), Seen{});
-      seen_generation_ = 1;
-    }
+    seen_.clear(count);
     keys_.resize(count);
     for (size_t i = 0; i < count; ++i) keys_[i] = layout_.key(descriptors[i], t);
     constexpr size_t kAhead = 8;  // buckets are scattered: request them a few features ahead
@@ -132,7 +114,7 @@ void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, Featu
       }
       const uint64_t key = keys_[i];
       // Intra-image burstiness: the keyframe's first feature in a bucket is its only entry there.
-      if (!firstInKeyframe(key)) continue;
+      if (!seen_.insert(key)) continue;
       Shard& shard = table.shards[table.shardOf(key)];
       const uint32_t s = shard.findOrAdd(table.dense, table.keyInShard(key));
       Slot& slot = shard.slots[s];

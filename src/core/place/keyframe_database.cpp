@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/common/stamped_set.hpp"
 
 namespace mild {
 
@@ -22,40 +23,10 @@ struct KeyframeDatabase::IndexScratch {
   };
   std::vector<FeatureId> candidates;
   std::vector<Survivor> survivors;
-
-  // The stored features this query feature has met so far (a stored feature close to it shares
-  // several substrings and is found in several tables): open addressing, emptied by a new stamp.
-  // Linear in the survivors, where sorting them was a third of the query on maps of many revisits.
-  void startMeeting(size_t expected) {
-    size_t size = 256;
-    while (size < 2 * expected) size *= 2;
-    if (size > met_ids.size()) {
-      met_ids.assign(size, 0);
-      met_stamps.assign(size, 0);
-      stamp = 0;
-    }
-    mask = met_ids.size() - 1;
-    if (++stamp == 0) {
-      std::fill(met_stamps.begin(), met_stamps.end(), 0);
-      stamp = 1;
-    }
-  }
-  bool firstMeeting(FeatureId id) {
-    for (size_t slot = (id * uint64_t{0x9E3779B97F4A7C15}) >> 32 & mask;; slot = (slot + 1) & mask) {
-      if (met_stamps[slot] != stamp) {
-        met_stamps[slot] = stamp;
-        met_ids[slot] = id;
-        return true;
-      }
-      if (met_ids[slot] == id) return false;
-    }
-  }
-
- private:
-  std::vector<FeatureId> met_ids;
-  std::vector<uint32_t> met_stamps;
-  uint32_t stamp = 0;
-  size_t mask = 0;
+  // The stored features this query feature has met: a stored feature close to it shares several
+  // substrings and is found in several tables. Linear in the survivors, where sorting the votes to
+  // drop the copies was a third of the query on maps of many revisits.
+  StampedSet met;
 };
 
 namespace {
@@ -302,10 +273,10 @@ void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, Index
     }
   }
   stats.early_rejections += n_candidates - survivors.size();
-  scratch.startMeeting(survivors.size());
+  scratch.met.clear(survivors.size());
   const size_t passed = survivors.size();
   survivors.erase(std::remove_if(survivors.begin(), survivors.end(),
-                                 [&](const IndexScratch::Survivor& s) { return !scratch.firstMeeting(s.id); }),
+                                 [&](const IndexScratch::Survivor& s) { return !scratch.met.insert(s.id); }),
                   survivors.end());
   stats.repeated_candidates += passed - survivors.size();
   stats.full_distances += survivors.size();
