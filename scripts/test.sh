@@ -31,7 +31,7 @@ if [[ "${MILD_SANITIZE:-}" == *thread* ]]; then
   export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$REPO/test/sanitizers/tsan.supp"
   GTESTS=(test_substring_layout test_mih_index test_keyframe_database test_database_file test_database_file_hostile
           test_database_directory test_loop_filter test_loop_detector test_parameters test_sparse_match
-          test_bounded_queue test_stamped_set test_evaluation test_mih_analysis test_relative_pose test_sessions test_ros_parts test_tools)
+          test_bounded_queue test_stamped_set test_geometric_verifier test_evaluation test_mih_analysis test_relative_pose test_sessions test_ros_parts test_tools)
   mild_configure_and_build --target "${GTESTS[@]}" || fail "[mild_lcd] test build failed"
 else
   mild_configure_and_build || fail "[mild_lcd] build failed"

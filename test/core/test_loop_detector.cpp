@@ -228,6 +228,34 @@ TEST(LoopDetector, RunsTheInstalledVerifierOnEveryCandidate) {
   EXPECT_EQ(static_cast<size_t>(seen->calls), candidates);
 }
 
+// A verifier of its own that answers for fewer candidates than it was given.
+class ShortVerifier : public CountingVerifier {
+ public:
+  std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates) const override {
+    std::vector<Verification> out = CountingVerifier::verifyAll(query, candidates);
+    out.pop_back();
+    return out;
+  }
+};
+
+TEST(LoopDetector, AVerifierThatLosesACandidateIsAnErrorNotAShortList) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  DetectorParams p = fixtureParams();
+  p.candidates.near_past = false;
+  LoopDetector detector(p);
+  detector.setVerifier(std::make_unique<ShortVerifier>());
+  bool thrown = false;
+  for (size_t i = 0; i < 20 && !thrown; ++i) {
+    try {
+      detector.process(frames[i], PixelFormat::kGray, i);
+    } catch (const std::logic_error& e) {
+      thrown = true;
+      EXPECT_NE(std::string(e.what()).find("verifications for"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_TRUE(thrown);
+}
+
 TEST(LoopDetector, RejectsDepthsAndCamerasThatDoNotFit) {
   LoopDetector detector;
   Features f;

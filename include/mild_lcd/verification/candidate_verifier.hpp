@@ -28,6 +28,14 @@ class CandidateVerifier {
  public:
   virtual ~CandidateVerifier() = default;
   virtual Verification verify(const Features& query, const Features& candidate) const = 0;
+  // Every candidate of one query, results in their order. One after another unless a verifier can
+  // do better (GeometricVerifier: concurrently).
+  virtual std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates) const {
+    std::vector<Verification> out;
+    out.reserve(candidates.size());
+    for (const Features& candidate : candidates) out.push_back(verify(query, candidate));
+    return out;
+  }
 };
 
 }  // namespace mild

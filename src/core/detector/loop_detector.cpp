@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
@@ -349,7 +350,15 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, KeyframeIndex q
   if (verifier_ && !candidates.empty()) {
     Features query_features = features(query_index);
     query_features.depths = std::move(query_depths);  // only the query's are needed (PnP), so none are stored
-    for (LoopCandidate& c : candidates) c.verification = verifier_->verify(query_features, map.features(c.index));
+    std::vector<Features> candidate_features;
+    candidate_features.reserve(candidates.size());
+    for (const LoopCandidate& c : candidates) candidate_features.push_back(map.features(c.index));
+    std::vector<Verification> verifications = verifier_->verifyAll(query_features, candidate_features);
+    if (verifications.size() != candidates.size()) {
+      throw std::logic_error("the candidate verifier returned " + std::to_string(verifications.size()) +
+                             " verifications for " + std::to_string(candidates.size()) + " candidates");
+    }
+    for (size_t i = 0; i < candidates.size(); ++i) candidates[i].verification = std::move(verifications[i]);
   }
   for (LoopCandidate& c : candidates) {
     c.probability = verifier_ ? scorer_.probability(c.filter_probability, c.verification) : c.filter_probability;

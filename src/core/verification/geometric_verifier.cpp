@@ -1,9 +1,11 @@
 #include "mild_lcd/verification/geometric_verifier.hpp"
 
 #include <cmath>
+#include <exception>
 #include <string>
 
 #include <opencv2/calib3d.hpp>
+#include <opencv2/core/utility.hpp>
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/verification/inlier_layout.hpp"
@@ -26,18 +28,52 @@ void VerificationParams::validate() const {
 }
 
 GeometricVerifier::GeometricVerifier(const VerificationParams& params)
-    : params_((params.validate(), params)), matcher_(params.matching) {}
+    : params_((params.validate(), params)), matchers_(1, SparseMatcher(params.matching)) {}
 
 Verification GeometricVerifier::verify(const Features& query, const Features& candidate) const {
   return check(query, candidate).verification;
 }
 
+std::vector<Verification> GeometricVerifier::verifyAll(const Features& query,
+                                                       const std::vector<Features>& candidates) const {
+  std::vector<Verification> out(candidates.size());
+  const int n = static_cast<int>(candidates.size());
+  if (!params_.parallel_candidates || n < 2 || cv::getNumThreads() < 2) {
+    for (int i = 0; i < n; ++i) out[i] = checkWith(matchers_.front(), query, candidates[i]).verification;
+    return out;
+  }
+  while (matchers_.size() < candidates.size()) matchers_.emplace_back(params_.matching);
+  std::vector<std::exception_ptr> failures(candidates.size());
+  // One stripe per candidate: each runs on one thread with a matcher of its own.
+  cv::parallel_for_(
+      cv::Range(0, n),
+      [&](const cv::Range& range) {
+        for (int i = range.start; i < range.end; ++i) {
+          try {
+            out[i] = checkWith(matchers_[i], query, candidates[i]).verification;
+          } catch (...) {
+            failures[i] = std::current_exception();
+          }
+        }
+      },
+      n);
+  for (const std::exception_ptr& failure : failures) {
+    if (failure) std::rethrow_exception(failure);
+  }
+  return out;
+}
+
 GeometricCheck GeometricVerifier::check(const Features& query, const Features& candidate) const {
+  return checkWith(matchers_.front(), query, candidate);
+}
+
+GeometricCheck GeometricVerifier::checkWith(SparseMatcher& matcher, const Features& query,
+                                            const Features& candidate) const {
   if (query.keypoints.size() != query.descriptors.size() ||
       candidate.keypoints.size() != candidate.descriptors.size()) {
     throw InvalidInput("geometric verification needs one keypoint per descriptor");
   }
-  return fit(query, candidate, matcher_.match(query.descriptors, candidate.descriptors));
+  return fit(query, candidate, matcher.match(query.descriptors, candidate.descriptors));
 }
 
 GeometricCheck GeometricVerifier::fit(const Features& query, const Features& train,
