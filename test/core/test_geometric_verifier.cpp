@@ -80,8 +80,8 @@ TEST(GeometricVerifier, VerifyingAllCandidatesAtOnceGivesWhatOneByOneGives) {
   ASSERT_GT(verified, 0u);
   ASSERT_LT(verified, candidates.size());
 
+  params.parallel_candidates = true;
   const GeometricVerifier concurrent(params);
-  ASSERT_TRUE(concurrent.params().parallel_candidates);
   // Repeated, so that candidates land on different threads in different orders.
   for (int round = 0; round < 4; ++round) {
     const std::vector<Verification> all = concurrent.verifyAll(query, candidates);
@@ -97,7 +97,9 @@ TEST(GeometricVerifier, OneBadCandidateAmongManyIsAClearErrorAndTheVerifierStays
   const OpenCvThreads threads(2);
   const Features query = sampleFrame(209);
   std::vector<Features> candidates = mixedCandidates();
-  const GeometricVerifier verifier{VerificationParams{}};
+  VerificationParams params;
+  params.parallel_candidates = true;
+  const GeometricVerifier verifier(params);
   const std::vector<Verification> before = verifier.verifyAll(query, candidates);
   candidates[3].keypoints.pop_back();  // one keypoint short of its descriptors
   EXPECT_THROW(verifier.verifyAll(query, candidates), mild::InvalidInput);

@@ -20,7 +20,7 @@ struct VerificationParams {
   int min_inliers = 15;
   double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
   double pnp_threshold = 3.0;
-  bool parallel_candidates = true;
+  bool parallel_candidates = false;
 
   static constexpr int kMinimalMatches = 8;  // the eight-point minimum of a two-view model
   static constexpr const char* kSection = "verification";
@@ -50,8 +50,9 @@ struct VerificationParams {
       "from PnP with this inlier threshold in pixels.");
     v("parallel_candidates", p.parallel_candidates, Bounds::any(),
       "Verify one keyframe's candidates concurrently, on OpenCV's worker threads (cv::getNumThreads(): the cores, "
-      "unless the process set fewer; mild_lcd's benchmarks set one). The same results either way; on two cores "
-      "three candidates take about 0.7 of the time (README \"Verification on two cores\").");
+      "unless the process set fewer). The same results either way; on two cores three candidates take about 0.7 "
+      "of the time, but in the soak at 30 Hz on two cores the node dropped keyframes with it and none without it, "
+      "so it is off by default (README \"Verification on two cores\").");
   }
 
   bool usesIntrinsics() const { return fx > 0.0; }
