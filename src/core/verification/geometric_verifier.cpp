@@ -36,12 +36,11 @@ Verification GeometricVerifier::verify(const Features& query, const Features& ca
 
 std::vector<Verification> GeometricVerifier::verifyAll(const Features& query,
                                                        const std::vector<Features>& candidates) const {
-  std::vector<Verification> out(candidates.size());
   const int n = static_cast<int>(candidates.size());
   if (!params_.parallel_candidates || n < 2 || cv::getNumThreads() < 2) {
-    for (int i = 0; i < n; ++i) out[i] = checkWith(matchers_.front(), query, candidates[i]).verification;
-    return out;
+    return CandidateVerifier::verifyAll(query, candidates);
   }
+  std::vector<Verification> out(candidates.size());
   while (matchers_.size() < candidates.size()) matchers_.emplace_back(params_.matching);
   std::vector<std::exception_ptr> failures(candidates.size());
   // One stripe per candidate: each runs on one thread with a matcher of its own.
