@@ -1,21 +1,24 @@
 #!/bin/bash
-# Accuracy with the default parameters on the five public bench sequences (../shared/bench) and on
-# generated ones: other seeds of every named kind, and long `scale` walks, rendered by
-# ../shared/bench/generator/gen.py into a cache outside the repository when missing. Prints
-# Markdown tables: per sequence (with the peers of PEERS.md where they were measured), the scorer's
-# leave-one-kind-out cross-validation, and writes the pooled reliability diagram.
+# Accuracy with the default parameters on the real camera sequences (../shared/bench/real), the five
+# public rendered sequences (../shared/bench) and generated ones: other seeds of every named kind,
+# and long `scale` walks, rendered by ../shared/bench/generator/gen.py into a cache outside the
+# repository when missing. Prints Markdown tables, real and rendered apart, each sequence beside the
+# peer detectors of ../shared/bench/PEERS.md on the same frames; the scorer's leave-one-kind-out
+# cross-validation (real frames are one kind); and writes the reliability diagrams, real and
+# rendered apart.
 #   ./scripts/bench_accuracy.sh                    # everything (about an hour on two cores)
-#   SETS=public ./scripts/bench_accuracy.sh        # public, train, holdout, scale, scale10k, scale20k: comma-separated
+#   SETS=real,public ./scripts/bench_accuracy.sh   # real, public, train, holdout, scale, scale10k, scale20k: comma-separated
 #   CONFIG=my.yaml ./scripts/bench_accuracy.sh     # another configuration
 # Seeds: train = 201, 202 (campus, night, city) and 201 (corridor, aliasing), on which the scorer's
-# weights were fitted together with the public five; holdout = 203, 204 of all five kinds and the
-# scale walks 301, 302 (5,000 frames), never used for fitting or choosing anything.
+# weights were fitted together with the public five and the real sequences; holdout = 203, 204 of
+# all five kinds and the scale walks 301, 302 (5,000 frames), never used for fitting or choosing
+# anything.
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
 BENCH="${BENCH:-$REPO/../shared/bench}"
 CACHE="${MILD_BENCH_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mild_lcd/bench}"
-SETS="${SETS:-public,train,holdout,scale}"
+SETS="${SETS:-real,public,train,holdout,scale}"
 OUT="${OUT:-$BUILD_DIR/bench_accuracy}"
 JOBS="${JOBS:-2}"
 mild_install_deps
@@ -42,6 +45,7 @@ add_generated() {  # name, gen.py arguments...
 }
 for set in ${SETS//,/ }; do
   case "$set" in
+    real) for s in gp_day_a gp_night_a; do sequences+=("$s=$BENCH/real/$s"); done ;;
     public) for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do sequences+=("$s=$BENCH/$s"); done ;;
     train)
       for k in pub_campus pub_night pub_city; do for seed in 201 202; do add_generated "${k}_s$seed" seq "$k" --seed "$seed"; done; done
@@ -53,7 +57,7 @@ for set in ${SETS//,/ }; do
     scale) for seed in 301 302; do add_generated "scale5k_s$seed" scale --frames 5000 --seed "$seed"; done ;;
     scale10k) add_generated scale10k_s311 scale --frames 10000 --seed 311 ;;  # not in the default SETS: ~40 min more
     scale20k) add_generated scale20k_s321 scale --frames 20000 --seed 321 ;;  # not in the default SETS: ~45 min more
-    *) echo "unknown set $set (public, train, holdout, scale, scale10k, scale20k)" >&2; exit 2 ;;
+    *) echo "unknown set $set (real, public, train, holdout, scale, scale10k, scale20k)" >&2; exit 2 ;;
   esac
 done
 
@@ -70,24 +74,37 @@ export CONFIG_ARGS="${config[*]}"
 printf '%s\n' "${sequences[@]}" | xargs -P "$JOBS" -I{} bash -c 'config=($CONFIG_ARGS); run_one "$@"' _ {}
 
 /usr/bin/python3 - "$OUT" "$BENCH" "${sequences[@]}" <<'EOF'
-import json, os, subprocess, sys
+import json, os, re, subprocess, sys
 out, bench, specs = sys.argv[1], sys.argv[2], sys.argv[3:]
-peers = {  # PEERS.md: recall@100%P / AP of the original MILD (loop probability) and iBoW-LCD
-    "pub_corridor": ("0.145 / 0.940", "0.662 / 0.868"), "pub_city": ("0.019 / 0.927", "0.411 / 0.884"),
-    "pub_aliasing": ("0.825 / 0.947", "0.780 / 0.843"), "pub_campus": ("0.277 / 0.787", "0.133 / 0.545"),
-    "pub_night": ("0.615 / 0.867", "0.588 / 0.752")}
-print("| sequence | recall@100%P | AP | max F1 | p >= 0.5: precision | p >= 0.5: recall | query ms | original MILD | iBoW-LCD |")
-print("|---|---|---|---|---|---|---|---|---|")
+# The peers' recall@100%P / AP on the same frames, read from the bench's own PEERS.md.
+peer_names = ["original MILD (probability)", "original MILD (similarity)", "iBoW-LCD", "DLoopDetector", "HBST"]
+peers = {}
+try:
+    for line in open(f"{bench}/PEERS.md"):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 6 and re.match(r"^[\d.]+ / [\d.]+ / [\d.]+$", cells[1]):
+            peers[cells[0].split("/")[-1]] = [" / ".join(c.split(" / ")[:2]) for c in cells[1:]]
+except OSError:
+    pass
+tables = {"real": [], "rendered": []}
 for spec in specs:
     name, folder = spec.split("=", 1)
-    gt = f"{folder}/gt_loops.txt"
-    m = json.loads(subprocess.run([f"{os.environ['BIN']}/mild_score", gt, f"{out}/{name}.csv", "--json"],
+    m = json.loads(subprocess.run([f"{os.environ['BIN']}/mild_score", f"{folder}/gt_loops.txt", f"{out}/{name}.csv", "--json"],
                                   capture_output=True, text=True, check=True).stdout)
     stats = json.load(open(f"{out}/{name}.json"))
-    mild, ibow = peers.get(name, ("-", "-"))
-    print(f"| {name} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | {m['max_f1']:.3f} | "
-          f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} | "
-          f"{stats['query_ms']['mean']:.1f} | {mild} | {ibow} |")
+    keyframe_ms = stats.get("keyframe_ms", {}).get("median", 0.0)
+    row = (f"| {name} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | {m['max_f1']:.3f} | "
+           f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} | {keyframe_ms:.1f} | "
+           + " | ".join(peers.get(name, ["-"] * 5)) + " |")
+    tables["real" if "/real/" in folder + "/" else "rendered"].append(row)
+for title, rows in tables.items():
+    if not rows:
+        continue
+    print(f"\n{title} frames: mild_lcd's recall@100%P, AP and max F1, then each peer's recall@100%P / AP (PEERS.md)\n")
+    print("| sequence | recall@100%P | AP | max F1 | p >= 0.5: precision | p >= 0.5: recall | keyframe ms (median) | "
+          + " | ".join(peer_names) + " |")
+    print("|---" * (7 + len(peer_names)) + "|")
+    print("\n".join(rows))
 EOF
 
 # The scorer, cross-validated: each kind left out in turn (its generated seeds with it).
@@ -102,6 +119,15 @@ if [[ ${#fit_runs[@]} -gt 1 ]]; then
   "$REPO/scripts/fit_scoring.py" --cv "${fit_runs[@]}" --json "$OUT/scoring_cv.json"
 fi
 
-# The pooled reliability diagram of every sequence run.
-/usr/bin/python3 "$REPO/scripts/plot_reliability.py" "$OUT/reliability.png" "$OUT" "${sequences[@]}"
-echo "[mild_lcd] candidates, details, stats and reliability.png in $OUT"
+# The reliability diagrams, real and rendered apart.
+real_runs=() rendered_runs=()
+for spec in "${sequences[@]}"; do
+  if [[ "${spec#*=}/" == */real/* ]]; then real_runs+=("$spec"); else rendered_runs+=("$spec"); fi
+done
+if [[ ${#real_runs[@]} -gt 0 ]]; then
+  /usr/bin/python3 "$REPO/scripts/plot_reliability.py" "$OUT/reliability_real.png" "$OUT" "${real_runs[@]}"
+fi
+if [[ ${#rendered_runs[@]} -gt 0 ]]; then
+  /usr/bin/python3 "$REPO/scripts/plot_reliability.py" "$OUT/reliability_rendered.png" "$OUT" "${rendered_runs[@]}"
+fi
+echo "[mild_lcd] candidates, details, stats and the reliability diagrams in $OUT"

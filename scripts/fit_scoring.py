@@ -1,18 +1,25 @@
 #!/usr/bin/python3
 """Fits the candidate scorer (config/default.yaml, section scoring) and cross-validates it.
 
-The scorer is a logistic model of five features of a verified candidate (candidate_scorer.hpp):
-logit of the filter's probability, ln(inliers), inlier ratio, inlier coverage, homography share.
-It is fitted by L2-regularised maximum likelihood (Newton's method) on every candidate that
-`mild_offline --details` wrote for sequences with ground truth: right pairs are 1, wrong ones 0,
-don't-care ones left out.
+The scorer is a logistic model of the feature vector of a candidate (candidate_scorer.hpp), which
+`mild_offline --details` writes as the columns named x_*: this script reads them as they are, so
+the features are defined once, in C++. It is fitted by L2-regularised maximum likelihood (Newton's
+method) on every candidate of sequences with ground truth, verified or not (the published
+probability ranks them all): right pairs are 1, wrong ones 0, don't-care ones left out. Then it is
+refitted a few rounds on each query's best candidate under the weights found, because that is the
+candidate whose probability is published first and scored.
+
+Every kind of data weighs the same in the fit, whatever its number of sequences and candidates:
+a kind is a sequence name without a trailing _s<seed> (pub_campus_s7 is a pub_campus), and every
+real-camera sequence (name starting with gp_ or real_) is the kind "real". Inside a kind, each
+sequence weighs the same.
 
 Usage:
   fit_scoring.py RUN [RUN ...] [--l2 0.01] [--cv] [--json OUT.json]
-RUN is NAME=SEQUENCE_DIR:DETAILS.csv (SEQUENCE_DIR holds gt_loops.txt). The kind of a run is its
-name without a trailing _s<seed> (pub_campus_s7 is a pub_campus): with --cv each kind is left out
-in turn, the scorer fitted on the others and scored on the runs of the kind left out (recall@100%P,
-AP, and precision/recall at probability >= 0.5). Prints the fit on all runs as a YAML section.
+RUN is NAME=SEQUENCE_DIR:DETAILS.csv (SEQUENCE_DIR holds gt_loops.txt). With --cv each kind is left
+out in turn, the scorer fitted on the others and scored on the runs of the kind left out
+(recall@100%P, AP, and precision/recall at probability >= 0.5). Prints the fit on all runs as a
+YAML section.
 """
 import json
 import math
@@ -21,7 +28,11 @@ import sys
 
 import numpy as np
 
-FEATURES = ["filter log-odds", "ln inliers", "inlier ratio", "coverage", "homography share"]
+
+def kind_of(name):
+    if name.startswith("gp_") or name.startswith("real_"):
+        return "real"
+    return re.sub(r"_s\d+$", "", name)
 
 
 def load_gt(seq):
@@ -40,12 +51,6 @@ def load_gt(seq):
     return truth, dont_care, queries
 
 
-def features(row):
-    p = min(max(float(row["filter_probability"]), 1e-6), 1 - 1e-6)
-    return [math.log(p / (1 - p)), math.log(max(int(row["inliers"]), 1)), float(row["inlier_ratio"]),
-            float(row["coverage"]), float(row["homography_share"])]
-
-
 def load_run(spec, min_gap=40):
     name, rest = spec.split("=", 1)
     seq, details = rest.rsplit(":", 1)
@@ -53,63 +58,72 @@ def load_run(spec, min_gap=40):
     rows = []
     with open(details) as f:
         header = f.readline().strip().split(",")
+        columns = [c for c in header if c.startswith("x_")]
+        if not columns:
+            sys.exit(f"{details}: no x_* feature columns (written by mild_offline --details)")
         for line in f:
             row = dict(zip(header, line.strip().split(",")))
             i, j = int(row["query"]), int(row["candidate"])
-            if i - j < min_gap or row["verified"] != "1":
+            if i - j < min_gap:
                 continue
             label = 1 if (i, j) in truth else (-1 if (i, j) in dont_care else 0)
-            rows.append((i, j, features(row), label))
-    return {"name": name, "kind": re.sub(r"_s\d+$", "", name), "rows": rows, "queries": queries}
+            rows.append((i, j, [float(row[c]) for c in columns], label))
+    return {"name": name, "kind": kind_of(name), "rows": rows, "queries": queries, "features": columns}
 
 
-def best_rows(runs, weights, bias):
+def row_weights(runs, rows_of):
+    """Each kind weighs 1, each of its runs 1 / (runs of the kind), each row of a run equally."""
+    per_kind = {}
+    for r in runs:
+        per_kind[r["kind"]] = per_kind.get(r["kind"], 0) + 1
+    x, y, w = [], [], []
+    for r in runs:
+        labelled = [row for row in rows_of(r) if row[3] >= 0]
+        for _, _, f, lab in labelled:
+            x.append(f)
+            y.append(lab)
+            w.append(1.0 / (len(labelled) * per_kind[r["kind"]]))
+    return np.array(x, dtype=float), np.array(y, dtype=float), np.array(w, dtype=float)
+
+
+def best_rows(run, weights, bias):
     """Each query's best candidate under the current weights: the one the evaluation (and a user
     acting on the best candidate) sees."""
-    out = []
-    for r in runs:
-        best = {}
-        for row in r["rows"]:
-            i, _, f, lab = row
-            s = bias + float(np.dot(weights, f))
-            if i not in best or s > best[i][0]:
-                best[i] = (s, row)
-        out += [row for _, row in best.values()]
-    return out
+    best = {}
+    for row in run["rows"]:
+        s = bias + float(np.dot(weights, row[2]))
+        if row[0] not in best or s > best[row[0]][0]:
+            best[row[0]] = (s, row)
+    return [row for _, row in best.values()]
 
 
 def fit(runs, l2, rounds=3):
-    """Fits on every candidate, then again on each query's best candidate under the weights found,
-    a few rounds: the probability of the candidate that is published as the best one is what
-    must be calibrated, and the best of several is more often a lucky wrong one than any one."""
-    rows = [row for r in runs for row in r["rows"]]
-    weights, bias = fit_rows(rows, l2)
+    weights, bias = fit_rows(*row_weights(runs, lambda r: r["rows"]), l2)
     for _ in range(rounds):
-        weights, bias = fit_rows(best_rows(runs, weights, bias), l2)
+        weights, bias = fit_rows(*row_weights(runs, lambda r: best_rows(r, weights, bias)), l2)
     return weights, bias
 
 
-def fit_rows(rows, l2):
-    x = np.array([f for (_, _, f, lab) in rows if lab >= 0], dtype=float)
-    y = np.array([lab for (_, _, _, lab) in rows if lab >= 0], dtype=float)
+def fit_rows(x, y, w, l2):
+    w = w / w.sum()
     x = np.hstack([x, np.ones((len(x), 1))])
-    w = np.zeros(x.shape[1])
+    beta = np.zeros(x.shape[1])
     penalty = l2 * np.eye(x.shape[1])
     penalty[-1, -1] = 0.0  # the bias is not shrunk
     for _ in range(100):
-        p = 1.0 / (1.0 + np.exp(-(x @ w)))
-        gradient = x.T @ (p - y) + penalty @ w
-        hessian = (x * (p * (1 - p))[:, None]).T @ x + penalty + 1e-9 * np.eye(x.shape[1])
+        p = 1.0 / (1.0 + np.exp(-(x @ beta)))
+        gradient = x.T @ (w * (p - y)) + penalty @ beta
+        hessian = (x * (w * p * (1 - p))[:, None]).T @ x + penalty + 1e-12 * np.eye(x.shape[1])
         step = np.linalg.solve(hessian, gradient)
-        w -= step
+        beta -= step
         if np.max(np.abs(step)) < 1e-10:
             break
-    return w[:-1], w[-1]
+    return beta[:-1], beta[-1]
 
 
 def metrics(run, weights, bias):
     best = {}
-    for i, j, f, lab in run["rows"]:
+    for i, _, f, lab in run["rows"]:
         s = 1.0 / (1.0 + math.exp(-(bias + float(np.dot(weights, f)))))
         if i not in best or s > best[i][0]:
             best[i] = (s, lab)
@@ -153,7 +167,9 @@ def main():
     if not specs:
         sys.exit(__doc__)
     runs = [load_run(s) for s in specs]
-    report = {"cv": []}
+    if len({tuple(r["features"]) for r in runs}) != 1:
+        sys.exit("the details files have different feature columns: re-run mild_offline on every sequence")
+    report = {"features": runs[0]["features"], "cv": []}
     if cv:
         print("| left out | run | recall@100%P | AP | precision at p >= 0.5 | recall at p >= 0.5 |")
         print("|---|---|---|---|---|---|")
@@ -169,7 +185,7 @@ def main():
     report["bias"] = round(float(b), 3)
     print("scoring:")
     print(f"  # fitted by scripts/fit_scoring.py on {', '.join(r['name'] for r in runs)} (l2 {l2})")
-    print(f"  # features: {', '.join(FEATURES)}")
+    print(f"  # features: {', '.join(runs[0]['features'])}")
     print(f"  weights: [{', '.join(f'{v:.3f}' for v in w)}]")
     print(f"  bias: {b:.3f}")
     if json_out:

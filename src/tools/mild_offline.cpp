@@ -66,7 +66,7 @@ std::optional<std::pair<cv::Mat, mild::PixelFormat>> readFrame(const std::string
 
 json timingJson(const std::vector<double>& samples) {
   const auto s = mild::tools::summarize(samples);
-  return {{"mean", s.mean}, {"median", s.median}, {"p95", s.p95}, {"max", s.max}};
+  return {{"mean", s.mean}, {"median", s.median}, {"p95", s.p95}, {"p99", s.p99}, {"max", s.max}};
 }
 
 int run(const Options& opt) {
@@ -105,12 +105,15 @@ int run(const Options& opt) {
     details.open(opt.details);
     if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
     details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
-               "homography_share,verified,accepted,near_past\n";
+               "homography_share,verified,accepted,near_past";
+    // The scorer's feature vector, as it computes it: scripts/fit_scoring.py fits on these columns.
+    for (const std::string& name : mild::CandidateScorer::featureNames()) details << "," << name;
+    details << "\n";
   }
 
   mild::LoopDetector detector(params);
   const size_t n = seq.frames.size();
-  std::vector<double> extract_ms, query_ms, filter_ms, verify_ms;
+  std::vector<double> extract_ms, query_ms, filter_ms, verify_ms, keyframe_ms;
   std::vector<float> similarity_matrix;
   if (!opt.similarity.empty()) similarity_matrix.assign(n * n, 0.0f);
   size_t skipped = 0, features = 0;
@@ -128,19 +131,21 @@ int run(const Options& opt) {
     query_ms.push_back(r.stats.query_ms);
     filter_ms.push_back(r.stats.filter_ms);
     verify_ms.push_back(r.stats.verify_ms);
+    keyframe_ms.push_back(r.stats.extract_ms + r.stats.query_ms + r.stats.filter_ms + r.stats.verify_ms);
     features += r.stats.features;
     for (const mild::LoopCandidate& c : r.candidates) {
-      // With verification on, the evaluation scores verified candidates only.
-      if (!detector.verifies() || c.verification.verified) {
-        csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
-      }
+      // Every candidate with its published probability: one that failed verification keeps a
+      // (low) probability, which ranks it below the verified ones.
+      csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
       if (c.verification.pose.valid) estimated.push_back({i, c.id, c.verification.pose});
       if (details.is_open()) {
         const mild::Verification& v = c.verification;
         details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
                 << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << ","
                 << v.inliers << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << ","
-                << (v.verified ? 1 : 0) << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "\n";
+                << (v.verified ? 1 : 0) << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes;
+        for (double x : mild::CandidateScorer::features(c.filter_probability, v)) details << "," << x;
+        details << "\n";
       }
     }
     if (!similarity_matrix.empty()) {
@@ -197,6 +202,8 @@ int run(const Options& opt) {
     json stats = {{"extract_ms", timingJson(extract_ms)},
                   {"query_ms", timingJson(query_ms)},
                   {"filter_ms", timingJson(filter_ms)},
+                  // The whole pipeline per keyframe: the four stages' sum (their own medians do not add up).
+                  {"keyframe_ms", timingJson(keyframe_ms)},
                   {"keyframes", detector.size()},
                   {"features", detector.database().featureCount()},
                   {"memory_bytes", detector.memoryBytes()},

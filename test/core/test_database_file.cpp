@@ -79,6 +79,7 @@ TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {
     SCOPED_TRACE(type);
     DetectorParams params = fixtureParams();
     params.filter.type = type;
+    params.scoring.filter_type = type;  // not a fitted scorer: the test compares runs, not probabilities
     LoopDetector whole(params);
     std::vector<DetectionResult> expected;
     process(whole, 0, 60, &expected);

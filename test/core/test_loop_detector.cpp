@@ -145,7 +145,7 @@ TEST(LoopDetector, IdsItCannotContinueFromAreRefusedAtInput) {
 }
 
 // OpenCV's ORB keeps every keypoint tied with the weakest it retains: on a tiled texture that was
-// thousands over orb/num_features.
+// thousands over orb/num_features (here scaled to the image's size, featureBudget).
 TEST(LoopDetector, ATiledTextureYieldsAtMostNumFeatures) {
   cv::Mat tile(16, 16, CV_8UC1);
   cv::randu(tile, 0, 256);
@@ -155,8 +155,10 @@ TEST(LoopDetector, ATiledTextureYieldsAtMostNumFeatures) {
   p.features.orb.num_features = 800;
   LoopDetector detector(p);
   const DetectionResult r = detector.process(tiled, PixelFormat::kGray, 0.0);
-  EXPECT_LE(r.stats.features, 800u);
-  EXPECT_GT(r.stats.features, 400u) << "the cap keeps the strongest, not fewer";
+  const size_t budget = featureBudget(800, tiled.total(), p.features.reference_pixels);
+  EXPECT_EQ(budget, 1848u);
+  EXPECT_LE(r.stats.features, budget);
+  EXPECT_GT(r.stats.features, budget / 2) << "the cap keeps the strongest, not fewer";
   // Deterministic: the same image keeps the same features.
   LoopDetector again(p);
   EXPECT_EQ(again.process(tiled, PixelFormat::kGray, 0.0).stats.features, r.stats.features);

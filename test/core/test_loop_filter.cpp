@@ -173,6 +173,50 @@ TEST(ExclusiveHypothesisFilter, ShorterSimilarityVectorDropsTheStateBeyondIt) {
   EXPECT_EQ(filter.loopProbability().size(), 5u);
 }
 
+TEST(ExclusiveHypothesisFilter, NoLoopLikelihoodGrowsWithTheEligibleKeyframes) {
+  FilterParams p;
+  p.no_loop_likelihood = 10.0;
+  p.no_loop_reference_keyframes = 450.0;
+  p.no_loop_growth = 0.5;
+  EXPECT_DOUBLE_EQ(noLoopLikelihood(p, 450), 10.0);
+  EXPECT_NEAR(noLoopLikelihood(p, 1800), 20.0, 1e-9) << "four times the keyframes, twice the likelihood";
+  EXPECT_NEAR(noLoopLikelihood(p, 50), 10.0 / 3.0, 1e-9);
+  EXPECT_DOUBLE_EQ(noLoopLikelihood(p, 2), 1.0) << "never below a keyframe's own lowest likelihood";
+  p.no_loop_growth = 0.0;
+  EXPECT_DOUBLE_EQ(noLoopLikelihood(p, 2), 10.0) << "growth 0: the constant of earlier versions";
+  EXPECT_DOUBLE_EQ(noLoopLikelihood(p, 100000), 10.0);
+}
+
+// Real camera frames: a revisit in a map of 60 keyframes whose robust z is about 8 (loops on the
+// bench's real frames reach 4-10) wins with the likelihood that grows with the map, and loses to
+// the constant that suits maps of many hundred keyframes; noise alone stays no loop either way.
+TEST(ExclusiveHypothesisFilter, ALoopInASmallMapNeedsLessSaliencyThanInALargeOne) {
+  Stream stream;
+  stream.gap = 40;
+  stream.steps = 100;
+  stream.offset = 60;
+  stream.revisit_start = 80;
+  stream.revisit_end = 100;
+  stream.strength = 3.0;  // z about 8 over noise of robust scale 0.37
+  const auto best_at_end = [&](const FilterParams& params, const Stream& s) {
+    ExclusiveHypothesisFilter filter(params);
+    double best = 0.0;
+    for (int t = 0; t < s.steps; ++t) {
+      const std::vector<double>& p = filter.update(s.at(t));
+      if (t == s.steps - 1) best = p.empty() ? 0.0 : *std::max_element(p.begin(), p.end());
+    }
+    return best;
+  };
+  FilterParams growing;  // the defaults
+  FilterParams constant;
+  constant.no_loop_growth = 0.0;
+  EXPECT_GT(best_at_end(growing, stream), 0.5);
+  EXPECT_LT(best_at_end(constant, stream), 0.2);
+  Stream noise = stream;
+  noise.revisit_start = noise.revisit_end = -1;
+  EXPECT_LT(best_at_end(growing, noise), 0.2);
+}
+
 TEST(ExclusiveHypothesisFilter, RejectsInvalidParameters) {
   FilterParams p;
   p.loop_persistence = 1.5;

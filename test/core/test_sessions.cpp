@@ -105,9 +105,11 @@ TEST_F(Sessions, AMapReloadedAsANewSessionFindsTheSecondHalfsLoopsAsWellAsOneRun
   std::cout << "queries 150-299: one run R@100P " << one_run.recall_at_100_precision << " AP "
             << one_run.average_precision << "; two sessions R@100P " << two_sessions.recall_at_100_precision << " AP "
             << two_sessions.average_precision << "\n";
-  EXPECT_NEAR(two_sessions.recall_at_100_precision, one_run.recall_at_100_precision, 0.02)
+  // As well as one run: nothing lost by the reload (a new session may find more: its filter starts
+  // afresh and yesterday's keyframes are exempt from the temporal exclusion).
+  EXPECT_GE(two_sessions.recall_at_100_precision, one_run.recall_at_100_precision - 0.02)
       << "one run " << one_run.recall_at_100_precision << ", two sessions " << two_sessions.recall_at_100_precision;
-  EXPECT_NEAR(two_sessions.average_precision, one_run.average_precision, 0.02);
+  EXPECT_GE(two_sessions.average_precision, one_run.average_precision - 0.02);
 }
 
 TEST_F(Sessions, AMergedMapKeepsBothMapsAndItsLoopsAreFound) {

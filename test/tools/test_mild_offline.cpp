@@ -1,11 +1,16 @@
 // Runs the installed-style mild_offline binary the way a user would and checks its contract.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <set>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -58,12 +63,17 @@ TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
   EXPECT_GT(std::count(csv.begin(), csv.end(), '\n'), 20);
 
   const auto stats = nlohmann::json::parse(readFile(path("s.json")));
-  for (const char* stage : {"extract_ms", "query_ms", "filter_ms"}) {
-    for (const char* key : {"mean", "median", "p95", "max"}) {
+  for (const char* stage : {"extract_ms", "query_ms", "filter_ms", "verify_ms", "keyframe_ms"}) {
+    for (const char* key : {"mean", "median", "p95", "p99", "max"}) {
       EXPECT_TRUE(stats[stage].contains(key)) << stage << "." << key;
     }
     EXPECT_GE(stats[stage]["max"].get<double>(), stats[stage]["median"].get<double>());
   }
+  // keyframe_ms is the four stages' sum per keyframe, so its mean is the sum of their means.
+  double stage_means = 0.0;
+  for (const char* stage : {"extract_ms", "query_ms", "filter_ms", "verify_ms"})
+    stage_means += stats[stage]["mean"].get<double>();
+  EXPECT_NEAR(stats["keyframe_ms"]["mean"].get<double>(), stage_means, 1e-6 * stage_means);
   EXPECT_EQ(stats["keyframes"].get<int>(), 60);
   EXPECT_GT(stats["features"].get<int>(), 1000);
   EXPECT_GT(stats["memory_bytes"].get<int>(), 0);
@@ -73,6 +83,50 @@ TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
     ASSERT_TRUE(fs::exists(p)) << p;
     EXPECT_EQ(readFile(p.string()).substr(1, 3), "PNG");
   }
+}
+
+// Every candidate is written with its probability, the ones that failed verification too (below the
+// verified ones of their query), and --details carries the scorer's feature vector as columns x_*,
+// which scripts/fit_scoring.py reads instead of recomputing it.
+TEST_F(MildOffline, ScoresEveryCandidateAndWritesTheScorerFeatures) {
+  const ProcessResult run = mildOffline("--images " + kFixture + " --config " + kFixtureConfig + " --output " +
+                                        path("c.csv") + " --details " + path("d.csv"));
+  ASSERT_EQ(run.status, 0) << run.output;
+  std::ifstream details(path("d.csv"));
+  std::string header;
+  std::getline(details, header);
+  std::vector<std::string> columns;
+  std::stringstream hs(header);
+  for (std::string c; std::getline(hs, c, ',');) columns.push_back(c);
+  std::vector<size_t> feature_columns;
+  for (size_t k = 0; k < columns.size(); ++k) {
+    if (columns[k].rfind("x_", 0) == 0) feature_columns.push_back(k);
+  }
+  EXPECT_EQ(feature_columns.size(), 2u) << header;
+  const auto column = [&](const std::string& name) {
+    return static_cast<size_t>(std::find(columns.begin(), columns.end(), name) - columns.begin());
+  };
+  size_t rows = 0, unverified = 0;
+  std::set<std::string> written;
+  std::ifstream csv(path("c.csv"));
+  std::string line;
+  std::getline(csv, line);
+  while (std::getline(csv, line)) written.insert(line);
+  for (std::string row; std::getline(details, row); ++rows) {
+    std::vector<std::string> cells;
+    std::stringstream rs(row);
+    for (std::string c; std::getline(rs, c, ',');) cells.push_back(c);
+    ASSERT_EQ(cells.size(), columns.size()) << row;
+    const double inliers = std::stod(cells[column("inliers")]);
+    EXPECT_NEAR(std::stod(cells[feature_columns[1]]), std::log(std::max(1.0, inliers)), 1e-4) << row;
+    if (cells[column("verified")] == "0") ++unverified;
+    EXPECT_EQ(
+        written.count(cells[column("query")] + "," + cells[column("candidate")] + "," + cells[column("probability")]),
+        1u)
+        << "every candidate is in the candidates file: " << row;
+  }
+  EXPECT_GT(rows, 20u);
+  EXPECT_GT(unverified, 0u) << "the fixture has candidates that fail verification";
 }
 
 // 512-bit descriptors end to end through the offline runner: BRISK features, a database of their

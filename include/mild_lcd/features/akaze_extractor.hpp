@@ -19,7 +19,8 @@ struct AkazeParams {
   static constexpr const char* kSection = "akaze";
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
-    v("num_features", p.num_features, Bounds::atLeast(1), "Upper bound on AKAZE features per keyframe.");
+    v("num_features", p.num_features, Bounds::atLeast(1),
+      "Upper bound on AKAZE features per keyframe of features/reference_pixels pixels.");
     v("threshold", p.threshold, Bounds::between(0, 1),
       "Detector response threshold. OpenCV's default 0.001 keeps ~30 features on the bench's 320 x 240 frames, "
       "0.0001 180 to 270.");
@@ -35,7 +36,8 @@ class AkazeExtractor : public FeatureExtractor {
   static constexpr const char* kName = "akaze";
   static constexpr int kDescriptorBytes = 61;
 
-  explicit AkazeExtractor(const AkazeParams& params = {});
+  // reference_pixels: num_features is meant for images of that many pixels (featureBudget); 0 = for any.
+  explicit AkazeExtractor(const AkazeParams& params = {}, double reference_pixels = 0.0);
   const AkazeParams& params() const { return params_; }
   const char* name() const override { return kName; }
   int descriptorBytes() const override { return kDescriptorBytes; }
@@ -43,6 +45,7 @@ class AkazeExtractor : public FeatureExtractor {
 
  private:
   AkazeParams params_;
+  double reference_pixels_ = 0.0;
   cv::Ptr<cv::AKAZE> akaze_;
 };
 

@@ -17,7 +17,8 @@ struct BriskParams {
   static constexpr const char* kSection = "brisk";
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
-    v("num_features", p.num_features, Bounds::atLeast(1), "Upper bound on BRISK features per keyframe.");
+    v("num_features", p.num_features, Bounds::atLeast(1),
+      "Upper bound on BRISK features per keyframe of features/reference_pixels pixels.");
     v("threshold", p.threshold, Bounds::in(1, 255),
       "AGAST detection threshold in grey levels (OpenCV's default is 30). 10, as ORB's FAST threshold: on the "
       "bench's 320 x 240 frames 30 keeps ~130 features, 20 ~350, 10 the full 800.");
@@ -33,7 +34,8 @@ class BriskExtractor : public FeatureExtractor {
   static constexpr const char* kName = "brisk";
   static constexpr int kDescriptorBytes = 64;
 
-  explicit BriskExtractor(const BriskParams& params = {});
+  // reference_pixels: num_features is meant for images of that many pixels (featureBudget); 0 = for any.
+  explicit BriskExtractor(const BriskParams& params = {}, double reference_pixels = 0.0);
   const BriskParams& params() const { return params_; }
   const char* name() const override { return kName; }
   int descriptorBytes() const override { return kDescriptorBytes; }
@@ -41,6 +43,7 @@ class BriskExtractor : public FeatureExtractor {
 
  private:
   BriskParams params_;
+  double reference_pixels_ = 0.0;
   cv::Ptr<cv::BRISK> brisk_;
 };
 

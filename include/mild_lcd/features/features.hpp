@@ -38,6 +38,12 @@ cv::Mat toGray(const cv::Mat& image, PixelFormat format);
 // that the choice is deterministic, in the detector's order.
 void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, size_t limit);
 
+// How many features an image of `pixels` pixels keeps when `count` is meant for an image of
+// reference_pixels: count * sqrt(pixels / reference_pixels), at most 4 * count and at least 1;
+// `count` itself when reference_pixels is 0. The square root keeps a large image's features about
+// as dense per unit of scale as a small one's while its cost grows less than its area.
+size_t featureBudget(int count, size_t pixels, double reference_pixels);
+
 // Runs an OpenCV detector-descriptor on a grey image and keeps the strongest `limit` features.
 // Images thinner than `min_side` pixels yield no features (detectors fail on them in their pyramid);
 // any OpenCV failure becomes InvalidInput naming `name` and the image size. Descriptors must come

@@ -18,7 +18,8 @@ struct OrbParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
-      "Upper bound on ORB features per keyframe (the seed paper uses up to 800); the strongest are kept.");
+      "Upper bound on ORB features per keyframe of features/reference_pixels pixels (the seed paper uses up to "
+      "800); the strongest are kept.");
     v("scale_factor", p.scale_factor, Bounds::aboveUpTo(1, 4), "Image pyramid: scale step between levels.");
     v("num_levels", p.num_levels, Bounds::in(1, 32), "Image pyramid: number of levels.");
     v("fast_threshold", p.fast_threshold, Bounds::in(1, 255),
@@ -38,7 +39,8 @@ class OrbExtractor : public FeatureExtractor {
   static constexpr const char* kName = "orb";
   static constexpr int kDescriptorBytes = 32;
 
-  explicit OrbExtractor(const OrbParams& params = {});
+  // reference_pixels: num_features is meant for images of that many pixels (featureBudget); 0 = for any.
+  explicit OrbExtractor(const OrbParams& params = {}, double reference_pixels = 0.0);
   const OrbParams& params() const { return params_; }
 
   const char* name() const override { return kName; }
@@ -47,6 +49,7 @@ class OrbExtractor : public FeatureExtractor {
 
  private:
   OrbParams params_;
+  double reference_pixels_ = 0.0;
   cv::Ptr<cv::ORB> orb_;
 };
 

@@ -23,7 +23,9 @@ struct FilterParams {
   double loop_persistence = 0.95;
   double loop_onset = 0.01;
   std::vector<double> motion_kernel = {0.3, 1.0, 0.6};
-  double no_loop_likelihood = 8.0;
+  double no_loop_likelihood = 10.0;
+  double no_loop_growth = 0.5;
+  double no_loop_reference_keyframes = 450.0;
   int candidate_window = 3;
 
   static constexpr const char* kSection = "filter";
@@ -41,8 +43,15 @@ struct FilterParams {
       "Where the matched keyframe moves per new keyframe: weights of advancing 0, 1, 2, ... keyframes along the "
       "old trajectory (at least one positive). Revisits advance; aliasing tends to stay on one stored keyframe.");
     v("no_loop_likelihood", p.no_loop_likelihood, Bounds::above(0),
-      "Likelihood of \"no loop\", in units of robust saliency (z). Queries without a loop reach a maximum z of "
-      "5-9 (median) on the bench, loop queries 60-70; 8-10 is a flat optimum.");
+      "Likelihood of \"no loop\", in units of robust saliency (z), with no_loop_reference_keyframes eligible "
+      "keyframes (see no_loop_growth).");
+    v("no_loop_growth", p.no_loop_growth, Bounds::in(0, 2),
+      "The no-loop likelihood grows as (eligible keyframes / no_loop_reference_keyframes)^no_loop_growth (never "
+      "below 1): the largest saliency among keyframes of no loop grows with their number, from about 3 at 50 "
+      "keyframes to 11-13 at 1,000 on every kind of the bench, real frames included (README \"Accuracy\"). 0 = a "
+      "constant no_loop_likelihood, the earlier design.");
+    v("no_loop_reference_keyframes", p.no_loop_reference_keyframes, Bounds::above(0),
+      "Eligible keyframes at which the no-loop likelihood is no_loop_likelihood.");
     v("candidate_window", p.candidate_window, Bounds::atLeast(0),
       "A candidate's loop probability is the posterior mass within +-candidate_window keyframes.");
   }
@@ -71,6 +80,11 @@ class TemporalFilter {
   virtual std::vector<uint8_t> saveState() const = 0;
   virtual void loadState(const std::vector<uint8_t>& bytes) = 0;
 };
+
+// The likelihood of "no loop" with n eligible keyframes: no_loop_likelihood scaled by
+// (n / no_loop_reference_keyframes)^no_loop_growth, and at least 1 (a keyframe's own likelihood is
+// never below 1, so below it "no loop" could never win).
+double noLoopLikelihood(const FilterParams& params, size_t eligible_keyframes);
 
 // The filter params.type names; throws InvalidInput for an unknown type.
 std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params);

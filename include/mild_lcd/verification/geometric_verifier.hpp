@@ -28,9 +28,10 @@ struct VerificationParams {
   static void declare(Self& p, Visit&& v) {
     v("enabled", p.enabled, Bounds::any(),
       "Geometric verification of every reported candidate: sparse match (MIH, seed paper IV.B) of query and "
-      "candidate, then a two-view model fitted with MAGSAC. Unverified candidates are still reported (verified = "
-      "false); mild_offline scores the verified ones. On the bench it lifts recall@100%P on pub_aliasing from "
-      "0.86 to 0.95 and leaves the others within 0.01.");
+      "candidate, then a two-view model fitted with MAGSAC. Candidates that fail it are still reported (verified "
+      "= false), with the low probability their few inliers give (scoring/); only verified ones are accepted. "
+      "Its inlier count is the published probability's evidence that means the same on real frames as on "
+      "renders (README \"Accuracy\").");
     SparseMatchParams::declare(p.matching, v);
     v("ransac_threshold", p.ransac_threshold, Bounds::above(0).runtime(), "Model fit: inlier threshold in pixels.");
     v("confidence", p.confidence, Bounds::between(0, 1), "Model fit: RANSAC confidence.");

@@ -38,6 +38,12 @@ void DetectorParams::validate() const {
     verification.matching.validateFor(bits);
   }
   scoring.validate();
+  if (scoring.enabled && verification.enabled && scoring.filter_type != filter.type) {
+    throw InvalidInput("scoring/weights were fitted with filter/type " + scoring.filter_type +
+                       " but this detector runs " + filter.type +
+                       ": its probability would be miscalibrated. Refit them on runs of " + filter.type +
+                       " (scripts/fit_scoring.py) and set scoring/filter_type, or set scoring/enabled false");
+  }
 }
 
 LoopDetector::LoopDetector(const DetectorParams& params)

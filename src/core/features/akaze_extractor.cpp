@@ -14,15 +14,17 @@ constexpr int kMinSide = 32;
 
 }  // namespace
 
-AkazeExtractor::AkazeExtractor(const AkazeParams& params) : params_((params.validate(), params)) {
+AkazeExtractor::AkazeExtractor(const AkazeParams& params, double reference_pixels)
+    : params_((params.validate(), params)), reference_pixels_(reference_pixels) {
   // The full M-LDB descriptor (size 0 = all 486 bits, 3 channels: intensity and both gradients).
   akaze_ = cv::AKAZE::create(cv::AKAZE::DESCRIPTOR_MLDB, 0, 3, static_cast<float>(params_.threshold), params_.octaves,
                              params_.octave_layers, cv::KAZE::DIFF_PM_G2);
 }
 
 Features AkazeExtractor::extract(const cv::Mat& image, PixelFormat format) const {
-  return detectAndDescribe(*akaze_, toGray(image, format), static_cast<size_t>(params_.num_features), kMinSide,
-                           kDescriptorBytes, kName);
+  const cv::Mat gray = toGray(image, format);
+  return detectAndDescribe(*akaze_, gray, featureBudget(params_.num_features, gray.total(), reference_pixels_),
+                           kMinSide, kDescriptorBytes, kName);
 }
 
 }  // namespace mild

@@ -15,14 +15,16 @@ constexpr int kMinSide = 32;
 
 }  // namespace
 
-BriskExtractor::BriskExtractor(const BriskParams& params) : params_((params.validate(), params)) {
+BriskExtractor::BriskExtractor(const BriskParams& params, double reference_pixels)
+    : params_((params.validate(), params)), reference_pixels_(reference_pixels) {
   brisk_ = cv::BRISK::create(params_.threshold, params_.octaves, static_cast<float>(params_.pattern_scale));
 }
 
 Features BriskExtractor::extract(const cv::Mat& image, PixelFormat format) const {
   const int min_side = static_cast<int>(std::ceil(kMinSide * params_.pattern_scale));
-  return detectAndDescribe(*brisk_, toGray(image, format), static_cast<size_t>(params_.num_features), min_side,
-                           kDescriptorBytes, kName);
+  const cv::Mat gray = toGray(image, format);
+  return detectAndDescribe(*brisk_, gray, featureBudget(params_.num_features, gray.total(), reference_pixels_),
+                           min_side, kDescriptorBytes, kName);
 }
 
 }  // namespace mild

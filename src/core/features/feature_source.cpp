@@ -28,9 +28,11 @@ void FeatureParams::validate() const {
 
 std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const FeatureParams& params) {
   params.validate();
-  if (params.type == BriskExtractor::kName) return std::make_unique<BriskExtractor>(params.brisk);
-  if (params.type == AkazeExtractor::kName) return std::make_unique<AkazeExtractor>(params.akaze);
-  return std::make_unique<OrbExtractor>(params.orb);
+  if (params.type == BriskExtractor::kName)
+    return std::make_unique<BriskExtractor>(params.brisk, params.reference_pixels);
+  if (params.type == AkazeExtractor::kName)
+    return std::make_unique<AkazeExtractor>(params.akaze, params.reference_pixels);
+  return std::make_unique<OrbExtractor>(params.orb, params.reference_pixels);
 }
 
 }  // namespace mild

@@ -1,6 +1,7 @@
 #include "mild_lcd/features/features.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <string>
 
 #include <opencv2/imgproc.hpp>
@@ -48,6 +49,12 @@ void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, s
   }
   keypoints = std::move(kept);
   descriptors = rows;
+}
+
+size_t featureBudget(int count, size_t pixels, double reference_pixels) {
+  if (!(reference_pixels > 0.0)) return static_cast<size_t>(std::max(1, count));
+  const double scale = std::min(4.0, std::sqrt(static_cast<double>(pixels) / reference_pixels));
+  return static_cast<size_t>(std::max(1.0, std::round(count * scale)));
 }
 
 Features detectAndDescribe(cv::Feature2D& detector, const cv::Mat& gray, size_t limit, int min_side, int bytes,

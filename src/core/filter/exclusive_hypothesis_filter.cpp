@@ -86,7 +86,8 @@ const std::vector<double>& ExclusiveHypothesisFilter::update(const std::vector<d
   // Likelihood from saliency.
   saliency_ = robustSaliency(similarity);
   posterior_.resize(n);
-  double total = params_.no_loop_likelihood * prior_none;
+  const double no_loop_likelihood = noLoopLikelihood(params_, n);
+  double total = no_loop_likelihood * prior_none;
   for (size_t j = 0; j < n; ++j) {
     const double likelihood = std::isfinite(saliency_[j]) ? std::max(1.0, saliency_[j]) : 1.0;
     posterior_[j] = likelihood * prior_[j];
@@ -98,7 +99,7 @@ const std::vector<double>& ExclusiveHypothesisFilter::update(const std::vector<d
     return windowed_;
   }
   for (double& p : posterior_) p /= total;
-  no_loop_ = params_.no_loop_likelihood * prior_none / total;
+  no_loop_ = no_loop_likelihood * prior_none / total;
 
   // Loop probability per keyframe: posterior mass of its neighbourhood (a running window sum).
   const size_t w = static_cast<size_t>(params_.candidate_window);

@@ -28,6 +28,12 @@ std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params) {
   return std::make_unique<ExclusiveHypothesisFilter>(params);
 }
 
+double noLoopLikelihood(const FilterParams& params, size_t eligible_keyframes) {
+  if (params.no_loop_growth == 0.0) return params.no_loop_likelihood;
+  const double ratio = static_cast<double>(eligible_keyframes) / params.no_loop_reference_keyframes;
+  return std::max(1.0, params.no_loop_likelihood * std::pow(ratio, params.no_loop_growth));
+}
+
 namespace {
 
 // Median with the two middle values averaged for an even count; reorders its argument.

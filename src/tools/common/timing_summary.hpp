@@ -10,6 +10,7 @@ struct TimingSummary {
   double mean = 0.0;
   double median = 0.0;
   double p95 = 0.0;
+  double p99 = 0.0;
   double max = 0.0;
 };
 
@@ -28,6 +29,7 @@ inline TimingSummary summarize(const std::vector<double>& samples) {
   s.mean /= static_cast<double>(samples.size());
   s.median = percentile(samples, 0.5);
   s.p95 = percentile(samples, 0.95);
+  s.p99 = percentile(samples, 0.99);
   s.max = *std::max_element(samples.begin(), samples.end());
   return s;
 }
