@@ -188,7 +188,9 @@ void PoseGraph2D::addKeyframe(uint64_t id, const Pose2& odometry) {
   const Pose2 delta = between(odometry_[i - 1], odometry);
   const double distance = std::hypot(delta.x, delta.y);
   const double sigma_t = std::max(params_.odometry_translation_min, params_.odometry_translation_sigma * distance);
-  const double sigma_r = std::max(params_.odometry_rotation_min, params_.odometry_rotation_sigma * std::sqrt(distance));
+  const double sigma_r =
+      std::max(params_.odometry_rotation_min, params_.odometry_rotation_sigma * std::sqrt(distance) +
+                                                  params_.odometry_rotation_per_rad * std::abs(delta.yaw));
   auto* cost = new ceres::AutoDiffCostFunction<RelativePoseCost, 3, 3, 3>(
       new RelativePoseCost{delta.x, delta.y, delta.yaw, 1.0 / sigma_t, 1.0 / sigma_r});
   impl_->problem.AddResidualBlock(cost, nullptr, impl_->estimates[i - 1].data(), block);

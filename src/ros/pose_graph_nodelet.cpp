@@ -73,12 +73,12 @@ class PoseGraphNodelet : public nodelet::Nodelet {
       odom_sub_ = nh.subscribe("odom", 200, &PoseGraphNodelet::onOdometry, this);
     }
     loop_sub_ = nh.subscribe("loop_closure", 100, &PoseGraphNodelet::onLoopClosure, this);
-    if (settings_.publish_tf) {
-      tf_timer_ = nh.createTimer(ros::Duration(1.0 / settings_.tf_rate), [this](const ros::TimerEvent&) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        broadcastCorrection();
-      });
-    }
+    // Also retries the keyframes waiting for their pose (with tf, no odometry message wakes them).
+    tf_timer_ = nh.createTimer(ros::Duration(1.0 / settings_.tf_rate), [this](const ros::TimerEvent&) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      processPending();
+      broadcastCorrection();
+    });
     NODELET_INFO("pose graph: keyframes from loop_closure, poses from %s, %s loops, loss %s",
                  settings_.use_odometry_topic ? "odom" : "tf", settings_.use_all_verified ? "verified" : "accepted",
                  settings_.graph.robust_loss.c_str());

@@ -30,7 +30,8 @@ void visitSettings(Settings& s, Visit&& visit) {
   visit("odometry_wait", s.odometry_wait, Bounds::above(0),
         "seconds a keyframe waits for odometry (or tf) at its stamp before it is dropped with a warning");
   visit("publish_tf", s.publish_tf, Bounds::any(), "broadcast map_frame -> odom_frame");
-  visit("tf_rate", s.tf_rate, Bounds::above(0), "rate of that broadcast, Hz");
+  visit("tf_rate", s.tf_rate, Bounds::above(0),
+        "rate of that broadcast, and of retrying the keyframes that wait for their pose, Hz");
 }
 
 template <class T>
