@@ -14,7 +14,7 @@ DetectorDiagnostics::DetectorDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& p
 void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   {
     // Never wait for a keyframe in progress: a busy worker refreshes the snapshot itself.
-    std::unique_lock<std::mutex> lock(shared_.mutex, std::try_to_lock);
+    const auto lock = shared_.tryLock();
     if (lock.owns_lock()) {
       worker_.refreshSnapshot(*shared_.team);
       failure_.clear();

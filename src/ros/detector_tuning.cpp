@@ -15,19 +15,23 @@ DetectorTuning::DetectorTuning(const ros::NodeHandle& pnh, const std::string& lo
   server_ =
       std::make_unique<dynamic_reconfigure::Server<mild_lcd::TuningConfig>>(mutex_, ros::NodeHandle(pnh, "tuning"));
   {
-    std::lock_guard<std::mutex> lock(shared_.mutex);
-    server_->updateConfig(tuningConfigOf(shared_.team->params()));  // not the cfg's defaults
+    const auto lock = shared_.lock();
+    latest_ = shared_.team->params();
   }
+  server_->updateConfig(tuningConfigOf(latest_));  // not the cfg's defaults
   server_->setCallback([this](mild_lcd::TuningConfig& config, uint32_t level) { apply(config, level); });
 }
 
+// Runs on the nodelet's callback queue, beside its diagnostics: it never waits for the detector,
+// which a merge or a save may hold for seconds. The values are validated here, against the latest
+// accepted ones, and applied by SharedDetector before the next keyframe.
 void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
-  std::lock_guard<std::mutex> lock(shared_.mutex);
-  mild::RobotTeam& team = *shared_.team;
   try {
-    const mild::DetectorParams next = paramsFromTuning(config, team.params());
-    if (mild::describeParameters(next) == mild::describeParameters(team.params())) return;
-    team.retune(next);
+    mild::DetectorParams next = paramsFromTuning(config, latest_);
+    next.validate();
+    if (mild::describeParameters(next) == mild::describeParameters(latest_)) return;
+    shared_.requestRetune(next);
+    latest_ = next;
     ROS_INFO_STREAM_NAMED(log_name_, "retuned: max_candidates " << next.candidates.max_candidates << ", exclusion "
                                                                 << next.candidates.exclusion_frames
                                                                 << " keyframes, decision probability "
@@ -35,7 +39,7 @@ void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
                                                                 << next.verification.min_inliers);
   } catch (const mild::InvalidInput& e) {
     ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure change refused, values kept: " << e.what());
-    config = tuningConfigOf(team.params());  // the server answers and publishes what holds
+    config = tuningConfigOf(latest_);  // the server answers and publishes what holds
   }
 }
 

@@ -70,7 +70,7 @@ void KeyframeWorker::process(const KeyframeInput& input) {
       features = featuresFromMsg(*input.keyframe);
     }
     const bool keypoints = hooks_.wants_keypoints && hooks_.wants_keypoints();
-    std::lock_guard<std::mutex> lock(shared_.mutex);
+    const auto lock = shared_.lock();
     mild::RobotTeam& team = *shared_.team;
     if (input.robot < shared_.failure.size() && !shared_.failure[input.robot].empty()) {
       throw mild::InvalidInput(shared_.failure[input.robot]);
@@ -79,6 +79,7 @@ void KeyframeWorker::process(const KeyframeInput& input) {
     out.result = out.image.image.empty() ? team.process(input.robot, std::move(features), out.header.stamp.toSec(), id)
                                          : team.process(input.robot, out.image.image, out.image.format,
                                                         out.header.stamp.toSec(), std::nullopt, input.camera);
+    ++shared_.changes;
     out.database_size = team.robot(input.robot).size();
     if (keypoints) {
       out.query_keypoints = team.robot(input.robot).record(out.result.query_index).keypoints;
