@@ -24,7 +24,7 @@ DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const s
       max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
   if (!database_path_.empty()) {
     try {
-      resolve(database_path_, false);
+      database_display_ = resolve(database_path_, false).display();
     } catch (const mild::Error& e) {
       throw mild::InvalidInput(std::string("parameter ~database_path: ") + e.what());
     }
@@ -62,7 +62,17 @@ std::string DatabaseStore::save(SharedDetector& shared, const std::string& reque
   const auto lock = shared.lock();
   if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
   mild::saveDetector(detector(shared), file);
+  if (file.display() == database_display_) saved_changes_ = shared.changes;
   return "saved " + std::to_string(detector(shared).size()) + " keyframes to " + file.display();
+}
+
+std::string DatabaseStore::autosave(SharedDetector& shared) {
+  if (!save_on_shutdown_ || !saves_allowed_) return "";
+  {
+    const auto lock = shared.lock();
+    if (saved_changes_ == shared.changes) return "";
+  }
+  return save(shared, "");
 }
 
 mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {

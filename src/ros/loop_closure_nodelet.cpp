@@ -26,8 +26,10 @@
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
+#include "mild_lcd/ros/periodic_task.hpp"
 #include "mild_lcd/ros/ros_parameter_source.hpp"
 #include "robot_inputs.hpp"
+#include "sigterm_shutdown.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -57,7 +59,10 @@ void shutdownMessage(const std::string& name, const std::string& text, bool warn
 
 class LoopClosureNodelet : public nodelet::Nodelet {
  public:
-  ~LoopClosureNodelet() override { shutdown(); }
+  ~LoopClosureNodelet() override {
+    shutdown();
+    sigterm_.reset();  // after the save: a SIGTERM meanwhile still means "shut down in order"
+  }
 
  private:
   // What the node keeps per robot: its inputs, its output, its maps and their services. A node
@@ -123,6 +128,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     diagnostics_ = std::make_unique<DetectorDiagnostics>(nh, pnh, getName(), shared_, *worker_);
     tuning_ = std::make_unique<DetectorTuning>(pnh, getName(), shared_);
     worker_->start();  // loads ~database_path first when ~load_on_start, then keyframes
+    if (settings_.save_on_shutdown && settings_.autosave_period > 0) {
+      autosave_ =
+          std::make_unique<PeriodicTask>(std::chrono::seconds(settings_.autosave_period), [this] { autosave(); });
+    }
+    sigterm_ = std::make_unique<SigtermAsShutdown>();
 
     for (size_t r = 0; r < robots_.size(); ++r) {
       robots_[r]->inputs = std::make_unique<RobotInputs>(robots_[r]->nh, pnh, r, settings_, getName(),
@@ -166,6 +176,18 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     if (failed) throw mild::IoError("a map failed to load at start-up");
   }
 
+  // ~autosave_period: what SIGKILL, a crash or a power cut would lose is bounded by the period.
+  void autosave() {
+    for (const auto& robot : robots_) {
+      try {
+        const std::string message = robot->store->autosave(shared_);
+        if (!message.empty()) NODELET_DEBUG("autosave: %s", message.c_str());
+      } catch (const std::exception& e) {
+        NODELET_WARN_THROTTLE(60.0, "autosave failed (the previous file is kept): %s", e.what());
+      }
+    }
+  }
+
   // Runs on the worker thread, without the detector lock.
   void publish(const ProcessedKeyframe& k) {
     const uint32_t robot = k.result.query_robot;
@@ -195,6 +217,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     for (const auto& robot : robots_) {
       if (robot->services) robot->services->shutdown();
     }
+    autosave_.reset();  // waits for a save in progress; the last save follows
     if (worker_) {
       const size_t waiting = worker_->counters().queued;
       worker_->stop();
@@ -235,6 +258,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   ros::Publisher all_pub_;
   std::unique_ptr<DetectorDiagnostics> diagnostics_;
   std::unique_ptr<DetectorTuning> tuning_;
+  std::unique_ptr<PeriodicTask> autosave_;
+  std::unique_ptr<SigtermAsShutdown> sigterm_;
 };
 
 }  // namespace mild_lcd

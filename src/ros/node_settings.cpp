@@ -42,7 +42,10 @@ void visitSettings(Settings& s, Visit&& visit) {
         "map file inside database_dir: default of the services, and of load_on_start/save_on_shutdown");
   visit("load_on_start", s.load_on_start, Bounds::any(), "load database_path at start-up, as a new session");
   visit("save_on_shutdown", s.save_on_shutdown, Bounds::any(),
-        "save to database_path on shutdown (never after a failed start-up load)");
+        "save to database_path on shutdown: SIGINT, SIGTERM, unload (never after a failed start-up load)");
+  visit("autosave_period", s.autosave_period, Bounds::in(0, 86400),
+        "with save_on_shutdown, also save database_path every this many seconds when the map changed (0 = on "
+        "shutdown only): SIGKILL, a crash or a power cut loses at most this much");
   visit("max_database_mb", s.max_database_mb, Bounds::in(1, 1 << 24),
         "database files larger than this are refused unread");
   visit("max_match_features", s.max_match_features, Bounds::in(1, 10000000),

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <limits>
 #include <set>
+#include <thread>
 
 #include <sensor_msgs/image_encodings.h>
 #include <boost/make_shared.hpp>
@@ -23,6 +24,7 @@
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
+#include "mild_lcd/ros/periodic_task.hpp"
 #include "mild_lcd/ros/tuning_config.hpp"
 
 namespace fs = std::filesystem;
@@ -217,6 +219,41 @@ TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
   EXPECT_NE(store.loadOnStart(running).find("does not exist yet"), std::string::npos);
   EXPECT_NE(store.saveOnShutdown(running).find("saved 3 keyframes"), std::string::npos);
   EXPECT_EQ(mild::readDetectorFile((dir_ / "new.db").string()).records.size(), 3u);
+}
+
+// ~autosave_period: with save_on_shutdown, the map is written when it changed since it was last
+// written to ~database_path (by any save), and never after a failed start-up load.
+TEST_F(Store, AutosaveWritesTheMapOnlyWhenItChanged) {
+  DatabaseStore store(settings("database_path: auto.db\nsave_on_shutdown: true\n"));
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(detector(3)));
+  EXPECT_EQ(store.autosave(shared), "") << "nothing learnt since start-up";
+  EXPECT_FALSE(fs::exists(dir_ / "auto.db"));
+  ++shared.changes;  // as the worker does after each keyframe
+  EXPECT_NE(store.autosave(shared).find("saved 3 keyframes"), std::string::npos);
+  EXPECT_EQ(mild::readDetectorFile((dir_ / "auto.db").string()).records.size(), 3u);
+  EXPECT_EQ(store.autosave(shared), "") << "unchanged since";
+  ++shared.changes;
+  store.save(shared, "auto.db");  // the service, to ~database_path
+  EXPECT_EQ(store.autosave(shared), "") << "the service's save counts";
+  ++shared.changes;
+  store.save(shared, "elsewhere.db");
+  EXPECT_NE(store.autosave(shared), "") << "a save elsewhere does not";
+
+  DatabaseStore without(settings("database_path: off.db\n"));
+  EXPECT_EQ(without.autosave(shared), "") << "only with save_on_shutdown";
+  EXPECT_FALSE(fs::exists(dir_ / "off.db"));
+}
+
+TEST(PeriodicTask, RunsEveryPeriodUntilDestroyed) {
+  std::atomic<int> runs{0};
+  {
+    PeriodicTask task(std::chrono::milliseconds(10), [&] { ++runs; });
+    while (runs < 3) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  const int after = runs;
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(runs, after) << "no run after destruction";
 }
 
 TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {

@@ -25,6 +25,7 @@ struct NodeSettings {
   std::string database_path;        // inside database_dir (a name relative to it, or absolute)
   bool load_on_start = false;
   bool save_on_shutdown = false;
+  int autosave_period = 60;        // seconds; with save_on_shutdown, a save this often when changed
   int max_database_mb = 16384;     // larger files are refused unread
   int max_match_features = 10000;  // per side of a sparse_match request
   std::string robots;              // names of the robots served, space- or comma-separated; "" = one
