@@ -112,8 +112,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     hooks.publish = [this](const ProcessedKeyframe& k) { publish(k); };
     hooks.wants_keypoints = [this] { return debug_pub_.getNumSubscribers() > 0; };
     hooks.warn = [this](const std::string& what) { NODELET_WARN_THROTTLE(2.0, "%s", what.c_str()); };
+    InputLimits limits;
+    limits.max_image_pixels = static_cast<uint64_t>(settings_.max_image_pixels);
+    limits.max_keyframe_features = static_cast<size_t>(settings_.max_keyframe_features);
     worker_ = std::make_unique<KeyframeWorker>(shared_, static_cast<size_t>(settings_.queue_size),
-                                               static_cast<uint64_t>(settings_.max_image_pixels), std::move(hooks));
+                                               static_cast<size_t>(settings_.queue_mb) << 20, limits, std::move(hooks));
 
     transport_ = std::make_unique<image_transport::ImageTransport>(nh);
     debug_pub_ = transport_->advertise("debug_image", 1);
@@ -152,9 +155,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   // Callbacks only queue: the nodelet manager's threads are never held up by detection.
   void enqueue(KeyframeInput item) {
-    if (!worker_->push(std::move(item))) {
-      NODELET_WARN_THROTTLE(2.0, "input queue full (queue_size %d): dropped the oldest keyframe, %zu dropped so far",
-                            settings_.queue_size, worker_->counters().dropped);
+    if (worker_->push(std::move(item)) == KeyframeWorker::Pushed::kDroppedOldest) {
+      NODELET_WARN_THROTTLE(2.0,
+                            "input queue full (queue_size %d, queue_mb %d): dropped the oldest keyframe, %zu dropped "
+                            "so far",
+                            settings_.queue_size, settings_.queue_mb, worker_->counters().dropped);
     }
   }
 

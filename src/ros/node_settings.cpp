@@ -29,13 +29,20 @@ void visitSettings(Settings& s, Visit&& visit) {
   visit("publish_correspondences", s.publish_correspondences, Bounds::any(),
         "add each verified candidate's inlier matches (keypoint indices and pixels) to `loop_closure`");
   visit("queue_size", s.queue_size, Bounds::in(1, 100000),
-        "keyframes waiting for the worker; when full the oldest is dropped and counted");
+        "keyframes waiting for the worker; when full the oldest is dropped and counted (roscpp's queue of each input "
+        "has the same length)");
+  visit("queue_mb", s.queue_mb, Bounds::in(1, 1 << 20),
+        "and at most this many megabytes of messages waiting (a message larger than that is rejected)");
   visit("debug_image_cache", s.debug_image_cache, Bounds::in(0, 1000000),
         "keyframes kept at half resolution for `debug_image` (0 = none)");
   visit("debug_image_cache_mb", s.debug_image_cache_mb, Bounds::in(0, 1 << 20),
         "and at most this many megabytes of them");
   visit("max_image_pixels", s.max_image_pixels, Bounds::in(1, 1 << 30),
-        "larger images (width x height) are refused before decoding");
+        "larger images (width x height) are refused before decoding; also bounds their bytes: a raw image's data "
+        "(exactly step x height) at most this many pixels of its encoding, a compressed one (JPEG or PNG only, judged "
+        "on its header) at most 4 bytes per pixel of it");
+  visit("max_keyframe_features", s.max_keyframe_features, Bounds::in(1, 1000000),
+        "`Keyframe` messages with more keypoints are refused (they would be stored, and matched whole)");
   visit("database_dir", s.database_dir, Bounds::any(),
         "the only folder maps are saved to and loaded from (default: database_path's folder, else $ROS_HOME/mild_lcd)");
   visit("database_path", s.database_path, Bounds::any(),

@@ -300,7 +300,7 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
     ++published;
     throw std::runtime_error("a publisher that fails");  // not the keyframe's fault
   };
-  KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   worker.push({image(200, 150, 1.0), nullptr, nullptr, {}});
   worker.push({image(1, 1, 2.0), nullptr, nullptr, {}});           // thinner than ORB's border: stored, no features
@@ -321,7 +321,7 @@ TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   std::unique_lock<std::mutex> hold(gate);  // the first keyframe waits here until we let it go
   KeyframeWorker::Hooks hooks;
   hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
-  KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   for (int i = 0; i < 10; ++i) worker.push({image(160, 120, i), nullptr, nullptr, {}});
   while (worker.counters().queued > 9) std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -377,6 +377,103 @@ TEST(CompressedImages, AreJudgedByTheirHeaderBeforeDecoding) {
   msg.data = png;
   EXPECT_EQ(imageFromMsg(msg, 50 * 30).image.size(), cv::Size(50, 30));
   EXPECT_THROW(imageFromMsg(msg, 50 * 30 - 1), mild::InvalidInput);
+}
+
+// Formats whose header this node does not read are refused before any decoder sees them: OpenCV's
+// TIFF and WebP decoders allocate for the size their header claims (593 bytes of TIFF may claim
+// 20000 x 20000 pixels).
+TEST(CompressedImages, OnlyJpegAndPngAreDecoded) {
+  const cv::Mat small(8, 8, CV_8UC3, cv::Scalar(10, 20, 30));
+  sensor_msgs::CompressedImage msg;
+  for (const std::string ext : {".tiff", ".webp", ".bmp", ".ppm"}) {
+    if (!cv::haveImageWriter(ext)) continue;
+    ASSERT_TRUE(cv::imencode(ext, small, msg.data)) << ext;
+    msg.format = ext.substr(1);
+    const std::string error = errorOf([&] { imageFromMsg(msg); });
+    EXPECT_NE(error.find("not a JPEG or PNG"), std::string::npos) << ext << ": " << error;
+    EXPECT_NE(errorOf([&] { checkedInputBytes(msg, InputLimits{}); }), "") << ext;
+  }
+  ASSERT_TRUE(cv::imencode(".jpg", small, msg.data));
+  EXPECT_EQ(imageFromMsg(msg).image.size(), small.size());
+  // And at most 4 bytes per pixel of ~max_image_pixels, whatever the header says.
+  msg.data.resize(4 * 1000 + 1, 0);
+  EXPECT_NE(errorOf([&] { imageFromMsg(msg, 1000); }).find("larger than 4000"), std::string::npos);
+}
+
+// A raw image's data is exactly step x height, and its step cannot make it larger than
+// ~max_image_pixels pixels of its encoding: eight 320 x 240 images carrying 250 MB each took the
+// node from 79 MB to 2.3 GB.
+TEST(InputBounds, AnImagesDataIsExactlyStepTimesHeightAndBoundedInBytes) {
+  auto msg = image(320, 240, 1.0);
+  const InputLimits limits{640 * 480, 10000};
+  EXPECT_GE(checkedInputBytes(*msg, limits), 320u * 240u);
+  EXPECT_EQ(imageFromMsg(*msg, limits.max_image_pixels).image.size(), cv::Size(320, 240));
+  msg->data.resize(320 * 240 + 1);  // one byte more than declared
+  EXPECT_NE(errorOf([&] { imageFromMsg(*msg, limits.max_image_pixels); }).find("exactly step x height"),
+            std::string::npos);
+  EXPECT_NE(errorOf([&] { checkedInputBytes(*msg, limits); }), "");
+  msg->step = 320 * 1000;  // a step a thousand rows wide, and data to match: 76.8 MB
+  msg->data.assign(static_cast<size_t>(msg->step) * msg->height, 0);
+  EXPECT_NE(errorOf([&] { checkedInputBytes(*msg, limits); }).find("more than ~max_image_pixels"), std::string::npos);
+  msg = image(320, 240, 2.0);
+  msg->header.frame_id.assign(100 * 1024, 'x');  // everything besides the pixels is small
+  EXPECT_NE(errorOf([&] { checkedInputBytes(*msg, limits); }).find("besides its payload"), std::string::npos);
+}
+
+TEST(InputBounds, AKeyframeHasAtMostMaxKeyframeFeaturesAndSmallExtras) {
+  const InputLimits limits{kDefaultMaxImagePixels, 100};
+  mild_lcd::Keyframe kf;
+  kf.keypoints.resize(100);
+  kf.descriptors.assign(100 * 32, 1);
+  kf.depths.assign(100, 1.0f);
+  EXPECT_GE(checkedInputBytes(kf, limits), 100u * (24 + 32 + 4));
+  kf.keypoints.resize(101);
+  kf.descriptors.assign(101 * 32, 1);
+  EXPECT_NE(errorOf([&] { checkedInputBytes(kf, limits); }).find("~max_keyframe_features (100)"), std::string::npos);
+  kf.keypoints.resize(1);
+  kf.descriptors.assign(101 * 64 + 1, 1);  // descriptors of no keypoints
+  EXPECT_NE(errorOf([&] { checkedInputBytes(kf, limits); }), "");
+  kf.descriptors.assign(32, 1);
+  kf.depths.clear();
+  kf.camera_info.D.assign(1000000, 0.0);  // 8 MB of "distortion"
+  EXPECT_NE(errorOf([&] { checkedInputBytes(kf, limits); }).find("besides its payload"), std::string::npos);
+}
+
+// Oversize messages are rejected (counted) as they are pushed, so they are released at once; the
+// queue holds at most queue_bytes of messages, dropping (counting) the oldest to make room.
+TEST(Worker, TheQueueIsBoundedInBytesAndOversizeInputsAreRejectedAsTheyArrive) {
+  SharedDetector shared;
+  mild::DetectorParams p;
+  p.verification.enabled = false;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>(p)));
+  std::mutex gate;
+  std::unique_lock<std::mutex> hold(gate);  // the worker waits in its first publish until released
+  KeyframeWorker::Hooks hooks;
+  hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
+  KeyframeWorker worker(shared, 100, 200 * 1000, InputLimits{2000 * 2000, 10000}, hooks);
+  worker.start();
+  EXPECT_EQ(worker.push({image(200, 150, 1.0), nullptr, nullptr, {}}), KeyframeWorker::Pushed::kQueued);
+  while (worker.counters().queued > 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));  // in progress
+  auto oversize = image(320, 240, 2.0);
+  oversize->data.resize(oversize->data.size() * 2);
+  EXPECT_EQ(worker.push({oversize, nullptr, nullptr, {}}), KeyframeWorker::Pushed::kRejected);
+  EXPECT_EQ(oversize.use_count(), 1) << "not kept by the worker";
+  EXPECT_EQ(worker.push({image(500, 500, 3.0), nullptr, nullptr, {}}), KeyframeWorker::Pushed::kRejected)
+      << "larger than the whole queue";
+  for (int i = 0; i < 5; ++i) worker.push({image(200, 150, 4.0 + i), nullptr, nullptr, {}});  // 30 KB each
+  WorkerCounters c = worker.counters();
+  EXPECT_LE(c.queued_bytes, 200u * 1000u);
+  EXPECT_EQ(c.rejected, 2u);
+  for (int i = 0; i < 5; ++i) worker.push({image(300, 300, 10.0 + i), nullptr, nullptr, {}});  // 90 KB each
+  c = worker.counters();
+  EXPECT_LE(c.queued_bytes, 200u * 1000u);
+  EXPECT_EQ(c.queued, 2u) << "two of 90 KB fit in 200 KB";
+  EXPECT_EQ(c.dropped, 8u);
+  hold.unlock();
+  worker.waitIdle();
+  c = worker.counters();
+  EXPECT_EQ(c.processed + c.dropped + c.rejected, 13u) << "every keyframe accounted for";
+  EXPECT_EQ(c.processed, 3u);
 }
 
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {
@@ -483,7 +580,7 @@ TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
   shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
   KeyframeWorker::Hooks hooks;
   hooks.publish = [](const ProcessedKeyframe&) {};
-  KeyframeWorker worker(shared, 10, 1000 * 1000, hooks);
+  KeyframeWorker worker(shared, 10, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   const mild::CameraIntrinsics camera{300.0, 300.0, 100.0, 75.0};
   worker.push({image(200, 150, 1.0), nullptr, nullptr, camera});

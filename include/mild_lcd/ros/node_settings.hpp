@@ -18,11 +18,13 @@ struct NodeSettings {
   bool use_camera_info = true;
   bool publish_correspondences = false;
   int queue_size = 100;
-  int debug_image_cache = 1000;     // keyframes kept (half resolution, grey) for debug_image
-  int debug_image_cache_mb = 64;    // and at most this many megabytes of them
-  int max_image_pixels = 16777216;  // larger images are refused before decoding (4096 x 4096)
-  std::string database_dir;         // the only folder maps are saved to and loaded from
-  std::string database_path;        // inside database_dir (a name relative to it, or absolute)
+  int queue_mb = 256;                 // and at most this many megabytes of messages
+  int debug_image_cache = 1000;       // keyframes kept (half resolution, grey) for debug_image
+  int debug_image_cache_mb = 64;      // and at most this many megabytes of them
+  int max_image_pixels = 16777216;    // larger images are refused before decoding (4096 x 4096)
+  int max_keyframe_features = 10000;  // Keyframe messages with more keypoints are refused
+  std::string database_dir;           // the only folder maps are saved to and loaded from
+  std::string database_path;          // inside database_dir (a name relative to it, or absolute)
   bool load_on_start = false;
   bool save_on_shutdown = false;
   int autosave_period = 60;        // seconds; with save_on_shutdown, a save this often when changed
