@@ -385,6 +385,16 @@ mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request
       if (!q) throw mild::InvalidInput("unknown query_id " + std::to_string(request.query_id));
       auto t = stored(request.train_id);
       if (!t) throw mild::InvalidInput("unknown train_id " + std::to_string(request.train_id));
+      // Stored keyframes are bounded like requests: a map loaded from a file may hold keyframes of
+      // any size, and matching two of 100,000 features held the service thread for a minute.
+      const auto refuseIfOver = [max_features](const char* side, uint64_t id, const mild::Features& f) {
+        if (f.descriptors.size() <= max_features) return;
+        throw mild::CapacityError(std::string(side) + " keyframe " + std::to_string(id) + " has " +
+                                  std::to_string(f.descriptors.size()) + " features, more than ~max_match_features (" +
+                                  std::to_string(max_features) + ")");
+      };
+      refuseIfOver("query", request.query_id, *q);
+      refuseIfOver("train", request.train_id, *t);
       query = std::move(*q);
       train = std::move(*t);
     }

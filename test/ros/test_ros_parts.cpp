@@ -476,6 +476,41 @@ TEST(Worker, TheQueueIsBoundedInBytesAndOversizeInputsAreRejectedAsTheyArrive) {
   EXPECT_EQ(c.processed, 3u);
 }
 
+// sparse_match by id bounds the stored keyframes as it bounds a request's descriptors: a map loaded
+// from a file may hold keyframes of any size (two of 20,000 and 100,000 features held the service
+// thread for 17 and 68 s).
+TEST(SparseMatchRequests, StoredKeyframesAreBoundedByMaxMatchFeaturesToo) {
+  const auto keyframe = [](size_t n) {
+    mild::Features f;
+    cv::RNG rng(static_cast<uint64_t>(n));
+    for (size_t i = 0; i < n; ++i) {
+      mild::Descriptor d;
+      for (int w = 0; w < d.numWords(); ++w) d.words[w] = (static_cast<uint64_t>(rng.next()) << 32) | rng.next();
+      f.descriptors.push_back(d);
+      f.keypoints.emplace_back(static_cast<float>(rng.uniform(0, 640)), static_cast<float>(rng.uniform(0, 480)), 7.0f);
+    }
+    return f;
+  };
+  const StoredFeatures stored = [&](uint64_t id) -> std::optional<mild::Features> { return keyframe(id); };
+  const mild::GeometricVerifier verifier(mild::VerificationParams{});
+  mild_lcd::SparseMatch::Request request;
+  request.query_id = 20000;  // the stand-in's id is its feature count
+  request.train_id = 300;
+  auto response = sparseMatch(request, stored, verifier, 10000);
+  EXPECT_FALSE(response.success);
+  EXPECT_NE(response.message.find("query keyframe 20000 has 20000 features, more than ~max_match_features (10000)"),
+            std::string::npos)
+      << response.message;
+  std::swap(request.query_id, request.train_id);
+  response = sparseMatch(request, stored, verifier, 10000);
+  EXPECT_FALSE(response.success);
+  EXPECT_NE(response.message.find("train keyframe 20000"), std::string::npos) << response.message;
+  request.query_id = 200;
+  request.train_id = 300;
+  response = sparseMatch(request, stored, verifier, 300);
+  EXPECT_TRUE(response.success) << response.message;
+}
+
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {
   EXPECT_EQ(stampOf(-5.0), ros::Time(0, 0));
   EXPECT_EQ(stampOf(1e12), ros::Time(4294967295u, 0));

@@ -91,8 +91,8 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
 
 // Serves a SparseMatch request. `stored` returns a copy of the features of a keyframe in the
 // database (none for an unknown id), so that the matching itself needs no lock on it. A side with
-// more than max_features descriptors is refused. Failures come back as success = false with a
-// message, never as exceptions.
+// more than max_features descriptors, given in the request or stored, is refused. Failures come back as success = false
+// with a message, never as exceptions.
 using StoredFeatures = std::function<std::optional<mild::Features>(uint64_t id)>;
 constexpr size_t kDefaultMaxMatchFeatures = 10000;
 mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request& request, const StoredFeatures& stored,
