@@ -252,9 +252,9 @@ int descriptorBytesOf(uint32_t field) {
 
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
   mild::Features f;
-  f.descriptors =
-      mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
-                                 descriptorBytesOf(msg.descriptor_bytes), static_cast<long>(msg.keypoints.size()));
+  f.declared_bytes = descriptorBytesOf(msg.descriptor_bytes);  // 0 declares ORB's 32
+  f.descriptors = mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(), f.declared_bytes,
+                                             static_cast<long>(msg.keypoints.size()));
   f.keypoints = keypointsFromMsg(msg.keypoints);
   f.camera = intrinsicsFromMsg(msg.camera_info);
   f.depths = msg.depths;  // their count is checked by the detector (checkCameraAndDepths)

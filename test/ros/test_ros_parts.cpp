@@ -511,6 +511,19 @@ TEST(SparseMatchRequests, StoredKeyframesAreBoundedByMaxMatchFeaturesToo) {
   EXPECT_TRUE(response.success) << response.message;
 }
 
+// A Keyframe message's descriptor_bytes reaches the detector even with no keypoints.
+TEST(Conversions, AnEmptyKeyframeCarriesItsDeclaredWidth) {
+  mild_lcd::Keyframe kf;
+  kf.descriptor_bytes = 64;
+  EXPECT_EQ(featuresFromMsg(kf).declared_bytes, 64);
+  kf.descriptor_bytes = 0;
+  EXPECT_EQ(featuresFromMsg(kf).declared_bytes, 32) << "0 means 32";
+  kf.descriptor_bytes = 64;
+  mild::LoopDetector orb;
+  EXPECT_THROW(orb.process(featuresFromMsg(kf), 1.0), mild::InvalidInput);
+  EXPECT_EQ(orb.size(), 0u);
+}
+
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {
   EXPECT_EQ(stampOf(-5.0), ros::Time(0, 0));
   EXPECT_EQ(stampOf(1e12), ros::Time(4294967295u, 0));
