@@ -263,12 +263,19 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
 
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
   const mild::CameraIntrinsics camera{msg.K[0], msg.K[4], msg.K[2], msg.K[5]};
-  const bool all_zero = std::all_of(msg.K.begin(), msg.K.end(), [](double v) { return v == 0.0; });
-  if (all_zero) return {};
-  if (!camera.known() || !camera.wellFormed()) {
-    throw mild::InvalidInput("camera_info K needs positive fx (K[0]), fy (K[4]) and finite cx (K[2]), cy (K[5]); got " +
-                             std::to_string(camera.fx) + ", " + std::to_string(camera.fy) + ", " +
-                             std::to_string(camera.cx) + ", " + std::to_string(camera.cy) + " (all zero = unknown)");
+  // Unknown when the entries read are zero, whatever the others hold: drivers without a
+  // calibration commonly send K all zero but K[8] = 1.
+  if (camera.fx == 0.0 && camera.fy == 0.0 && camera.cx == 0.0 && camera.cy == 0.0) return {};
+  // Finite but absurd values (fx 1e12, 1e-300) would not fail loudly: every candidate would just
+  // fail verification.
+  const auto plausible = [](double focal) { return focal >= kMinFocalPixels && focal <= kMaxFocalPixels; };
+  if (!camera.known() || !camera.wellFormed() || !plausible(camera.fx) || !plausible(camera.fy) ||
+      std::abs(camera.cx) > kMaxFocalPixels || std::abs(camera.cy) > kMaxFocalPixels) {
+    throw mild::InvalidInput(
+        "camera_info K needs fx (K[0]) and fy (K[4]) within [1, 1e6] pixels and cx (K[2]), cy (K[5]) "
+        "within +-1e6; got " +
+        std::to_string(camera.fx) + ", " + std::to_string(camera.fy) + ", " + std::to_string(camera.cx) + ", " +
+        std::to_string(camera.cy) + " (fx, fy, cx, cy all zero = unknown)");
   }
   return camera;
 }

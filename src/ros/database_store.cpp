@@ -13,11 +13,18 @@ std::string robotPath(const std::string& path, const std::string& robot) {
   return (p.parent_path() / robot / p.filename()).string();
 }
 
+mild::DirectoryLimits directoryLimits(const NodeSettings& settings) {
+  mild::DirectoryLimits limits;
+  limits.max_entries = static_cast<size_t>(settings.max_database_files);
+  limits.max_bytes = static_cast<unsigned long long>(settings.max_database_dir_mb) << 20;
+  return limits;
+}
+
 }  // namespace
 
 DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const std::string& robot_name)
     : robot_(robot),
-      directory_(settings.database_dir),
+      directory_(settings.database_dir, directoryLimits(settings)),
       database_path_(robotPath(settings.database_path, robot_name)),
       load_on_start_(settings.load_on_start),
       save_on_shutdown_(settings.save_on_shutdown),

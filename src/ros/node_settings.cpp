@@ -55,6 +55,11 @@ void visitSettings(Settings& s, Visit&& visit) {
         "shutdown only): SIGKILL, a crash or a power cut loses at most this much");
   visit("max_database_mb", s.max_database_mb, Bounds::in(1, 1 << 24),
         "database files larger than this are refused unread");
+  visit("max_database_files", s.max_database_files, Bounds::in(1, 1000000),
+        "a save that would add a file or folder to database_dir is refused once it holds this many (names may be "
+        "at most 8 folders deep)");
+  visit("max_database_dir_mb", s.max_database_dir_mb, Bounds::in(1, 1 << 30),
+        "a save is refused once the files in database_dir (but the one it replaces) hold this many megabytes");
   visit("max_match_features", s.max_match_features, Bounds::in(1, 10000000),
         "descriptors per side of a sparse_match request, at most");
   visit("robots", s.robots, Bounds::any(),

@@ -597,6 +597,25 @@ TEST(Conversions, AKeyframesCameraInfoAndDepthsReachTheCore) {
   EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput);
 }
 
+// K all zero but K[8] = 1 (a common driver pattern) means "no calibration", as all zero does; finite
+// but absurd focal lengths are refused rather than silently failing every verification.
+TEST(Conversions, UncalibratedAndAbsurdIntrinsics) {
+  sensor_msgs::CameraInfo info;
+  info.K = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0};
+  EXPECT_FALSE(intrinsicsFromMsg(info).known()) << "unknown, not an error";
+  for (const double fx : {1e12, 1e-300, 0.5, 2e6}) {
+    info.K = {fx, 0.0, 159.5, 0.0, 256.0, 119.5, 0.0, 0.0, 1.0};
+    const std::string error = errorOf([&] { intrinsicsFromMsg(info); });
+    EXPECT_NE(error.find("[1, 1e6]"), std::string::npos) << fx << ": " << error;
+    info.K = {256.0, 0.0, 159.5, 0.0, fx, 119.5, 0.0, 0.0, 1.0};
+    EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput) << "fy " << fx;
+  }
+  info.K = {256.0, 0.0, 1e12, 0.0, 256.0, 119.5, 0.0, 0.0, 1.0};
+  EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput) << "cx 1e12";
+  info.K = {1.0, 0.0, -5.0, 0.0, 1e6, 1e6, 0.0, 0.0, 1.0};
+  EXPECT_TRUE(intrinsicsFromMsg(info).known()) << "the bounds themselves are accepted";
+}
+
 TEST(Conversions, MetricPosesAndCorrespondencesArePublishedWhenAskedFor) {
   mild::DetectionResult result;
   mild::LoopCandidate c;

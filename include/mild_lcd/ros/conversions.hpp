@@ -78,8 +78,11 @@ int descriptorBytesOf(uint32_t field);
 // the width is the database's is for the detector to judge.
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 
-// fx, fy, cx, cy from a CameraInfo's K; unknown when K is all zero. Throws InvalidInput for a K
-// that is neither (a zero or negative focal length beside other values, values not finite).
+// fx, fy, cx, cy from a CameraInfo's K; unknown when those four are zero (whatever K[8] and the
+// rest hold). Throws InvalidInput for a K that is neither: a focal length outside
+// [kMinFocalPixels, kMaxFocalPixels], a principal point beyond +-kMaxFocalPixels, values not finite.
+constexpr double kMinFocalPixels = 1.0;
+constexpr double kMaxFocalPixels = 1e6;
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg);
 
 // The answer published for one processed keyframe (candidate stamps come from the candidates).

@@ -27,10 +27,12 @@ struct NodeSettings {
   std::string database_path;          // inside database_dir (a name relative to it, or absolute)
   bool load_on_start = false;
   bool save_on_shutdown = false;
-  int autosave_period = 60;        // seconds; with save_on_shutdown, a save this often when changed
-  int max_database_mb = 16384;     // larger files are refused unread
-  int max_match_features = 10000;  // per side of a sparse_match request
-  std::string robots;              // names of the robots served, space- or comma-separated; "" = one
+  int autosave_period = 60;         // seconds; with save_on_shutdown, a save this often when changed
+  int max_database_mb = 16384;      // larger files are refused unread
+  int max_database_files = 100;     // files and folders saves may leave in database_dir
+  int max_database_dir_mb = 65536;  // and the megabytes its files may hold before a save is refused
+  int max_match_features = 10000;   // per side of a sparse_match request
+  std::string robots;               // names of the robots served, space- or comma-separated; "" = one
 
   // The robots' names ("" = one robot, topics without a prefix), checked by load().
   std::vector<std::string> robotNames() const;
