@@ -108,6 +108,30 @@ TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
             std::string::npos);
 }
 
+// dynamic_reconfigure's parsing skips entries it cannot place; the node names them and refuses the
+// request.
+TEST(Tuning, EntriesThatNameNoParameterOrHaveTheWrongTypeAreNamed) {
+  dynamic_reconfigure::Config request;
+  dynamic_reconfigure::IntParameter i;
+  i.name = "detector_max_candidates";
+  i.value = 2;
+  request.ints.push_back(i);
+  dynamic_reconfigure::DoubleParameter d;
+  d.name = "scoring_decision_probability";
+  d.value = 0.7;
+  request.doubles.push_back(d);
+  EXPECT_EQ(unreadTuningEntries(request), "");
+  EXPECT_EQ(unreadTuningEntries({}), "") << "an empty request (a get)";
+  d.name = "detector_max_candidates";  // an int parameter given as a double
+  request.doubles.push_back(d);
+  dynamic_reconfigure::BoolParameter b;
+  b.name = "index_num_tables";  // not a runtime parameter
+  request.bools.push_back(b);
+  const std::string problems = unreadTuningEntries(request);
+  EXPECT_NE(problems.find("'detector_max_candidates' takes int values, not double"), std::string::npos) << problems;
+  EXPECT_NE(problems.find("'index_num_tables' is not a tuning parameter"), std::string::npos) << problems;
+}
+
 TEST(NodeSettings, TheReadmeTableIsTheDeclaration) {
   std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
   const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
