@@ -151,6 +151,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         settings_.use_keyframe_input ? "keyframe input" : "", params.features.type.c_str(),
         params.features.descriptorBytes(), params.candidates.exclusion_frames,
         params.verification.enabled ? "on" : "off", robots_.front()->store->directory().c_str());
+    const std::string cost = extractionCostWarning(settings_, params.features.type);
+    if (!cost.empty()) NODELET_WARN("%s", cost.c_str());
   }
 
   // Callbacks only queue: the nodelet manager's threads are never held up by detection.

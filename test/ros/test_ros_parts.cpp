@@ -132,6 +132,16 @@ TEST(Tuning, EntriesThatNameNoParameterOrHaveTheWrongTypeAreNamed) {
   EXPECT_NE(problems.find("'index_num_tables' is not a tuning parameter"), std::string::npos) << problems;
 }
 
+// BRISK and AKAZE on images as large as ~max_image_pixels allows can hold the worker for minutes:
+// the node says so at start-up, unless the bound keeps images small or the input is features.
+TEST(NodeSettings, WarnsOfCostlyExtractionOnLargeImages) {
+  EXPECT_EQ(extractionCostWarning(settingsFrom(""), "orb"), "");
+  EXPECT_NE(extractionCostWarning(settingsFrom(""), "akaze").find("~max_image_pixels (16777216)"), std::string::npos);
+  EXPECT_NE(extractionCostWarning(settingsFrom(""), "brisk"), "");
+  EXPECT_EQ(extractionCostWarning(settingsFrom("max_image_pixels: 4194304\n"), "akaze"), "");
+  EXPECT_EQ(extractionCostWarning(settingsFrom("use_image_input: false\n"), "akaze"), "");
+}
+
 TEST(NodeSettings, TheReadmeTableIsTheDeclaration) {
   std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
   const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());

@@ -43,6 +43,12 @@ struct NodeSettings {
   static NodeSettings load(const mild::ParameterSource& source, const std::string& default_dir);
 };
 
+// BRISK and AKAZE describe every keypoint they detect, and AKAZE builds a nonlinear scale space of
+// the whole image: their time and memory grow with the pixels and with the keypoints found (noise
+// finds the most). A warning for the log when ~max_image_pixels lets such images in (over
+// 2048 x 2048 pixels); "" otherwise.
+std::string extractionCostWarning(const NodeSettings& settings, const std::string& feature_type);
+
 // One line per setting: name, default and meaning (for --print-config style listings and the
 // README's interface table).
 struct SettingDoc {
