@@ -163,6 +163,8 @@ TEST(BusyDetector, ARetuneDuringALongMergeLosesNoKeyframe) {
       << answered << " answered, " << dropped << " dropped, " << rejected << " rejected, " << discarded
       << " discarded of " << kSent << " sent";
   EXPECT_EQ(rejected, 0);
+  RecordProperty("accounted", std::to_string(answered) + " answered, " + std::to_string(dropped) + " dropped, " +
+                                  std::to_string(rejected) + " rejected, " + std::to_string(discarded) + " discarded");
   fs::remove_all(busyDir());
 }
 
