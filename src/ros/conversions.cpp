@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include <ros/serialization.h>
 #include <sensor_msgs/image_encodings.h>
 #include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
@@ -28,25 +29,16 @@ constexpr Layout kDirect[] = {
     {"bgra8", CV_8UC4, mild::PixelFormat::kBgra}, {"rgba8", CV_8UC4, mild::PixelFormat::kRgba},
 };
 
-// Wraps the message buffer after checking that it really holds height rows of step bytes.
-cv::Mat wrap(const sensor_msgs::Image& msg, int type) {
-  const size_t row_bytes = static_cast<size_t>(msg.width) * CV_ELEM_SIZE(type);
-  if (msg.step < row_bytes) {
-    throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is smaller than a row of " +
-                             std::to_string(msg.width) + " pixels (" + std::to_string(row_bytes) + " bytes)");
+constexpr Layout kMono16{"mono16", CV_16UC1, mild::PixelFormat::kGray};
+
+// The layout of an accepted encoding; InvalidInput for any other.
+const Layout& layoutOf(const std::string& encoding) {
+  for (const Layout& l : kDirect) {
+    if (encoding == l.encoding) return l;
   }
-  // OpenCV refuses (throws on) rows that do not start on a whole sample, e.g. an odd step in mono16.
-  if (msg.step % CV_ELEM_SIZE1(type) != 0) {
-    throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is not a multiple of the " +
-                             std::to_string(CV_ELEM_SIZE1(type)) + "-byte sample of " + msg.encoding);
-  }
-  if (msg.data.size() < static_cast<size_t>(msg.step) * msg.height) {
-    throw mild::InvalidInput("image data holds " + std::to_string(msg.data.size()) + " bytes but " +
-                             std::to_string(msg.height) + " rows of " + std::to_string(msg.step) + " are declared");
-  }
-  if (msg.width > 1u << 15 || msg.height > 1u << 15) throw mild::InvalidInput("image larger than 32768 pixels a side");
-  return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type, const_cast<uint8_t*>(msg.data.data()),
-                 msg.step);
+  if (encoding == enc::MONO16 || encoding == enc::TYPE_16UC1) return kMono16;
+  throw mild::InvalidInput("unsupported image encoding '" + encoding +
+                           "' (accepted: mono8, mono16, bgr8, rgb8, bgra8, rgba8)");
 }
 
 void refuseLargerThan(uint64_t width, uint64_t height, uint64_t max_pixels, const char* what) {
@@ -54,6 +46,24 @@ void refuseLargerThan(uint64_t width, uint64_t height, uint64_t max_pixels, cons
     throw mild::InvalidInput(std::string(what) + " of " + std::to_string(width) + " x " + std::to_string(height) +
                              " pixels is larger than ~max_image_pixels (" + std::to_string(max_pixels) + ")");
   }
+}
+
+// What a message holds besides its payload (header, encoding, camera_info, ...) is small.
+template <class Msg>
+size_t checkedOverhead(const Msg& msg, size_t payload_bytes, const char* what) {
+  const size_t total = ros::serialization::serializationLength(msg);
+  if (total - payload_bytes > kMaxMessageOverheadBytes) {
+    throw mild::InvalidInput(std::string(what) + " holds " + std::to_string(total - payload_bytes) +
+                             " bytes besides its payload (header, strings, camera_info), more than " +
+                             std::to_string(kMaxMessageOverheadBytes));
+  }
+  return total;
+}
+
+// Wraps the message buffer; checkedInputBytes has made sure that it holds height rows of step bytes.
+cv::Mat wrap(const sensor_msgs::Image& msg, int type) {
+  return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type, const_cast<uint8_t*>(msg.data.data()),
+                 msg.step);
 }
 
 uint32_t bigEndian(const uint8_t* p, int bytes) {
@@ -99,32 +109,86 @@ std::optional<cv::Size> compressedImageSize(const std::vector<uint8_t>& data) {
   return std::nullopt;
 }
 
-DecodedImage imageFromMsg(const sensor_msgs::Image& msg, uint64_t max_pixels) {
+size_t checkedInputBytes(const sensor_msgs::Image& msg, const InputLimits& limits) {
   if (msg.width == 0 || msg.height == 0) {
     throw mild::InvalidInput("empty image (" + std::to_string(msg.width) + " x " + std::to_string(msg.height) + ")");
   }
-  refuseLargerThan(msg.width, msg.height, max_pixels, "image");
-  for (const Layout& l : kDirect) {
-    if (msg.encoding == l.encoding) return DecodedImage{wrap(msg, l.type), l.format};
+  refuseLargerThan(msg.width, msg.height, limits.max_image_pixels, "image");
+  if (msg.width > 1u << 15 || msg.height > 1u << 15) throw mild::InvalidInput("image larger than 32768 pixels a side");
+  const Layout& layout = layoutOf(msg.encoding);
+  const uint64_t pixel_bytes = static_cast<uint64_t>(CV_ELEM_SIZE(layout.type));
+  const uint64_t row_bytes = msg.width * pixel_bytes;
+  if (msg.step < row_bytes) {
+    throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is smaller than a row of " +
+                             std::to_string(msg.width) + " pixels (" + std::to_string(row_bytes) + " bytes)");
   }
-  if (msg.encoding == enc::MONO16 || msg.encoding == enc::TYPE_16UC1) {
-    if (msg.is_bigendian) throw mild::InvalidInput("big-endian mono16 images are not supported");
-    DecodedImage out;
-    wrap(msg, CV_16UC1).convertTo(out.image, CV_8UC1, 1.0 / 256.0);
-    return out;
+  // OpenCV refuses (throws on) rows that do not start on a whole sample, e.g. an odd step in mono16.
+  if (msg.step % CV_ELEM_SIZE1(layout.type) != 0) {
+    throw mild::InvalidInput("image step " + std::to_string(msg.step) + " is not a multiple of the " +
+                             std::to_string(CV_ELEM_SIZE1(layout.type)) + "-byte sample of " + msg.encoding);
   }
-  throw mild::InvalidInput("unsupported image encoding '" + msg.encoding +
-                           "' (accepted: mono8, mono16, bgr8, rgb8, bgra8, rgba8)");
+  const uint64_t declared = static_cast<uint64_t>(msg.step) * msg.height;
+  if (msg.data.size() != declared) {
+    throw mild::InvalidInput("image data holds " + std::to_string(msg.data.size()) + " bytes but " +
+                             std::to_string(msg.height) + " rows of " + std::to_string(msg.step) +
+                             " are declared (it must be exactly step x height)");
+  }
+  // A narrow image with a huge step is as large as a wide one.
+  if (declared > limits.max_image_pixels * pixel_bytes) {
+    throw mild::InvalidInput("image data of " + std::to_string(declared) + " bytes (step " + std::to_string(msg.step) +
+                             ") is more than ~max_image_pixels (" + std::to_string(limits.max_image_pixels) +
+                             ") pixels of " + msg.encoding + " hold");
+  }
+  return checkedOverhead(msg, msg.data.size(), "image");
+}
+
+size_t checkedInputBytes(const sensor_msgs::CompressedImage& msg, const InputLimits& limits) {
+  if (msg.data.empty()) throw mild::InvalidInput("empty compressed image");
+  const uint64_t max_bytes = kMaxCompressedBytesPerPixel * limits.max_image_pixels;
+  if (msg.data.size() > max_bytes) {
+    throw mild::InvalidInput("compressed image of " + std::to_string(msg.data.size()) + " bytes is larger than " +
+                             std::to_string(max_bytes) + " (" + std::to_string(kMaxCompressedBytesPerPixel) +
+                             " bytes per pixel of ~max_image_pixels)");
+  }
+  // The header's size, before a decoder allocates for it: 500 bytes may claim 20000 x 20000
+  // pixels. Only formats whose header is read here are decoded at all (a TIFF or WebP decoder
+  // allocates for its header's size before anything could judge it).
+  const auto size = compressedImageSize(msg.data);
+  if (!size) {
+    throw mild::InvalidInput("compressed image (format '" + msg.format +
+                             "') is not a JPEG or PNG whose header gives its size: only those are decoded");
+  }
+  if (size->width <= 0 || size->height <= 0) throw mild::InvalidInput("compressed image declares no pixels");
+  refuseLargerThan(static_cast<uint64_t>(size->width), static_cast<uint64_t>(size->height), limits.max_image_pixels,
+                   "compressed image");
+  return checkedOverhead(msg, msg.data.size(), "compressed image");
+}
+
+size_t checkedInputBytes(const mild_lcd::Keyframe& msg, const InputLimits& limits) {
+  const size_t n = limits.max_keyframe_features;
+  if (msg.keypoints.size() > n || msg.descriptors.size() > n * mild::kMaxDescriptorBytes || msg.depths.size() > n) {
+    throw mild::InvalidInput("keyframe has " + std::to_string(msg.keypoints.size()) + " keypoints, " +
+                             std::to_string(msg.descriptors.size()) + " descriptor bytes and " +
+                             std::to_string(msg.depths.size()) + " depths: more than ~max_keyframe_features (" +
+                             std::to_string(n) + ") allows");
+  }
+  const size_t payload = msg.keypoints.size() * ros::serialization::serializationLength(mild_lcd::KeyPoint()) +
+                         msg.descriptors.size() + msg.depths.size() * sizeof(float);
+  return checkedOverhead(msg, payload, "keyframe");
+}
+
+DecodedImage imageFromMsg(const sensor_msgs::Image& msg, uint64_t max_pixels) {
+  checkedInputBytes(msg, InputLimits{max_pixels, kDefaultMaxKeyframeFeatures});
+  const Layout& layout = layoutOf(msg.encoding);
+  if (layout.type != CV_16UC1) return DecodedImage{wrap(msg, layout.type), layout.format};
+  if (msg.is_bigendian) throw mild::InvalidInput("big-endian mono16 images are not supported");
+  DecodedImage out;
+  wrap(msg, CV_16UC1).convertTo(out.image, CV_8UC1, 1.0 / 256.0);
+  return out;
 }
 
 DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg, uint64_t max_pixels) {
-  if (msg.data.empty()) throw mild::InvalidInput("empty compressed image");
-  // The header's size, before a decoder allocates for it: 500 bytes may claim 20000 x 20000 pixels.
-  if (const auto size = compressedImageSize(msg.data)) {
-    if (size->width <= 0 || size->height <= 0) throw mild::InvalidInput("compressed image declares no pixels");
-    refuseLargerThan(static_cast<uint64_t>(size->width), static_cast<uint64_t>(size->height), max_pixels,
-                     "compressed image");
-  }
+  checkedInputBytes(msg, InputLimits{max_pixels, kDefaultMaxKeyframeFeatures});
   cv::Mat decoded;
   try {
     decoded = cv::imdecode(msg.data, cv::IMREAD_UNCHANGED);
@@ -188,9 +252,9 @@ int descriptorBytesOf(uint32_t field) {
 
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
   mild::Features f;
-  f.descriptors =
-      mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(),
-                                 descriptorBytesOf(msg.descriptor_bytes), static_cast<long>(msg.keypoints.size()));
+  f.declared_bytes = descriptorBytesOf(msg.descriptor_bytes);  // 0 declares ORB's 32
+  f.descriptors = mild::descriptorsFromBytes(msg.descriptors.data(), msg.descriptors.size(), f.declared_bytes,
+                                             static_cast<long>(msg.keypoints.size()));
   f.keypoints = keypointsFromMsg(msg.keypoints);
   f.camera = intrinsicsFromMsg(msg.camera_info);
   f.depths = msg.depths;  // their count is checked by the detector (checkCameraAndDepths)
@@ -199,12 +263,19 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
 
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
   const mild::CameraIntrinsics camera{msg.K[0], msg.K[4], msg.K[2], msg.K[5]};
-  const bool all_zero = std::all_of(msg.K.begin(), msg.K.end(), [](double v) { return v == 0.0; });
-  if (all_zero) return {};
-  if (!camera.known() || !camera.wellFormed()) {
-    throw mild::InvalidInput("camera_info K needs positive fx (K[0]), fy (K[4]) and finite cx (K[2]), cy (K[5]); got " +
-                             std::to_string(camera.fx) + ", " + std::to_string(camera.fy) + ", " +
-                             std::to_string(camera.cx) + ", " + std::to_string(camera.cy) + " (all zero = unknown)");
+  // Unknown when the entries read are zero, whatever the others hold: drivers without a
+  // calibration commonly send K all zero but K[8] = 1.
+  if (camera.fx == 0.0 && camera.fy == 0.0 && camera.cx == 0.0 && camera.cy == 0.0) return {};
+  // Finite but absurd values (fx 1e12, 1e-300) would not fail loudly: every candidate would just
+  // fail verification.
+  const auto plausible = [](double focal) { return focal >= kMinFocalPixels && focal <= kMaxFocalPixels; };
+  if (!camera.known() || !camera.wellFormed() || !plausible(camera.fx) || !plausible(camera.fy) ||
+      std::abs(camera.cx) > kMaxFocalPixels || std::abs(camera.cy) > kMaxFocalPixels) {
+    throw mild::InvalidInput(
+        "camera_info K needs fx (K[0]) and fy (K[4]) within [1, 1e6] pixels and cx (K[2]), cy (K[5]) "
+        "within +-1e6; got " +
+        std::to_string(camera.fx) + ", " + std::to_string(camera.fy) + ", " + std::to_string(camera.cx) + ", " +
+        std::to_string(camera.cy) + " (fx, fy, cx, cy all zero = unknown)");
   }
   return camera;
 }
@@ -321,6 +392,16 @@ mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request
       if (!q) throw mild::InvalidInput("unknown query_id " + std::to_string(request.query_id));
       auto t = stored(request.train_id);
       if (!t) throw mild::InvalidInput("unknown train_id " + std::to_string(request.train_id));
+      // Stored keyframes are bounded like requests: a map loaded from a file may hold keyframes of
+      // any size, and matching two of 100,000 features held the service thread for a minute.
+      const auto refuseIfOver = [max_features](const char* side, uint64_t id, const mild::Features& f) {
+        if (f.descriptors.size() <= max_features) return;
+        throw mild::CapacityError(std::string(side) + " keyframe " + std::to_string(id) + " has " +
+                                  std::to_string(f.descriptors.size()) + " features, more than ~max_match_features (" +
+                                  std::to_string(max_features) + ")");
+      };
+      refuseIfOver("query", request.query_id, *q);
+      refuseIfOver("train", request.train_id, *t);
       query = std::move(*q);
       train = std::move(*t);
     }

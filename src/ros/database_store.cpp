@@ -13,18 +13,25 @@ std::string robotPath(const std::string& path, const std::string& robot) {
   return (p.parent_path() / robot / p.filename()).string();
 }
 
+mild::DirectoryLimits directoryLimits(const NodeSettings& settings) {
+  mild::DirectoryLimits limits;
+  limits.max_entries = static_cast<size_t>(settings.max_database_files);
+  limits.max_bytes = static_cast<unsigned long long>(settings.max_database_dir_mb) << 20;
+  return limits;
+}
+
 }  // namespace
 
 DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const std::string& robot_name)
     : robot_(robot),
-      directory_(settings.database_dir),
+      directory_(settings.database_dir, directoryLimits(settings)),
       database_path_(robotPath(settings.database_path, robot_name)),
       load_on_start_(settings.load_on_start),
       save_on_shutdown_(settings.save_on_shutdown),
       max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
   if (!database_path_.empty()) {
     try {
-      resolve(database_path_, false);
+      database_display_ = resolve(database_path_, false).display();
     } catch (const mild::Error& e) {
       throw mild::InvalidInput(std::string("parameter ~database_path: ") + e.what());
     }
@@ -44,13 +51,13 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
     if (!file.exists()) return "database " + file.display() + " does not exist yet: starting with an empty map";
     mild::PreparedLoad prepared = mild::prepareLoad(detector(shared), file, false, max_bytes_);
     const std::string message = prepared.report.message;
-    std::lock_guard<std::mutex> lock(shared.mutex);
+    const auto lock = shared.lock();
     mild::commitLoad(detector(shared), std::move(prepared));
-    shared.team->mapChanged(robot_);
+    shared.team->mapChanged(robot_);  // the file holds it: no change to save
     return message;
   } catch (const std::exception& e) {
     saves_allowed_ = false;
-    std::lock_guard<std::mutex> lock(shared.mutex);
+    const auto lock = shared.lock();
     failure(shared) = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
                       "); the file is left untouched and nothing will be saved over it";
     throw;
@@ -59,10 +66,20 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
 
 std::string DatabaseStore::save(SharedDetector& shared, const std::string& requested) {
   const mild::ConfinedFile file = resolve(requested, true);
-  std::lock_guard<std::mutex> lock(shared.mutex);
+  const auto lock = shared.lock();
   if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
   mild::saveDetector(detector(shared), file);
+  if (file.display() == database_display_) saved_changes_ = shared.changes;
   return "saved " + std::to_string(detector(shared).size()) + " keyframes to " + file.display();
+}
+
+std::string DatabaseStore::autosave(SharedDetector& shared) {
+  if (!save_on_shutdown_ || !saves_allowed_) return "";
+  {
+    const auto lock = shared.lock();
+    if (saved_changes_ == shared.changes) return "";
+  }
+  return save(shared, "");
 }
 
 mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
@@ -70,9 +87,10 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
   // LoopDetector's parameters never change after construction: preparing needs no lock.
   mild::PreparedLoad prepared = mild::prepareLoad(detector(shared), file, continue_session, max_bytes_);
   mild::LoadReport report = prepared.report;
-  std::lock_guard<std::mutex> lock(shared.mutex);
+  const auto lock = shared.lock();
   mild::commitLoad(detector(shared), std::move(prepared));
   shared.team->mapChanged(robot_);
+  ++shared.changes;
   // A map loaded by hand is the user's decision: the start-up failure no longer stands in the way.
   failure(shared).clear();
   saves_allowed_ = true;
@@ -82,13 +100,14 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
 mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string& requested) {
   const mild::ConfinedFile file = resolve(requested, false);
   mild::DetectorState state = mild::readDetectorFile(file, max_bytes_);
-  std::lock_guard<std::mutex> lock(shared.mutex);
+  const auto lock = shared.lock();
   // Merging into the empty map of a failed start-up would save over the map that failed: refused.
   if (!failure(shared).empty()) {
     throw mild::InvalidInput(failure(shared) + "; load_database without merge replaces it");
   }
   mild::LoadReport report = mild::mergeState(detector(shared), std::move(state), file.display());
   shared.team->mapChanged(robot_);
+  ++shared.changes;
   return report;
 }
 

@@ -14,7 +14,7 @@ DetectorDiagnostics::DetectorDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& p
 void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
   {
     // Never wait for a keyframe in progress: a busy worker refreshes the snapshot itself.
-    std::unique_lock<std::mutex> lock(shared_.mutex, std::try_to_lock);
+    const auto lock = shared_.tryLock();
     if (lock.owns_lock()) {
       worker_.refreshSnapshot(*shared_.team);
       failure_.clear();
@@ -45,6 +45,8 @@ void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& 
   status.add("processed keyframes", c.processed);
   status.add("queue depth", c.queued);
   status.add("queue capacity", c.capacity);
+  status.add("queue (MB)", static_cast<double>(c.queued_bytes) / 1e6);
+  status.add("queue capacity (MB)", static_cast<double>(c.capacity_bytes) / 1e6);
   status.add("dropped keyframes", c.dropped);
   status.add("rejected keyframes", c.rejected);
   status.add("discarded keyframes", c.discarded);

@@ -51,14 +51,14 @@ void DetectorServices::shutdown() {
 
 bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild_lcd::SparseMatch::Response& response) {
   const auto stored = [this](uint64_t id) -> std::optional<mild::Features> {
-    std::lock_guard<std::mutex> lock(shared_.mutex);  // a copy, then the lock is free again
+    const auto lock = shared_.lock();  // a copy, then the lock is free again
     auto k = detector().find(id);
     if (!k) return std::nullopt;
     return detector().features(*k);
   };
   {
     // The verification parameters may have been retuned (dynamic_reconfigure) since it was built.
-    std::lock_guard<std::mutex> lock(shared_.mutex);
+    const auto lock = shared_.lock();
     if (shared_.team->retunes() != verifier_retunes_) {
       verifier_ = std::make_unique<mild::GeometricVerifier>(alwaysOn(shared_.team->params().verification));
       verifier_retunes_ = shared_.team->retunes();
@@ -71,9 +71,10 @@ bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild
 
 bool DetectorServices::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response) {
   const size_t pending = worker_.discardPending();
-  std::lock_guard<std::mutex> lock(shared_.mutex);
+  const auto lock = shared_.lock();
   const size_t keyframes = shared_.team->keyframes();
   shared_.team->reset();
+  ++shared_.changes;
   for (std::string& f : shared_.failure) f.clear();
   debug_cache_.clear();
   worker_.refreshSnapshot(*shared_.team);
@@ -115,7 +116,7 @@ bool DetectorServices::load(mild_lcd::LoadDatabase::Request& request, mild_lcd::
     response.message = e.what();
     ROS_WARN_STREAM_NAMED(log_name_, "load_database: " << e.what());
   }
-  std::lock_guard<std::mutex> lock(shared_.mutex);
+  const auto lock = shared_.lock();
   response.keyframes = static_cast<uint32_t>(detector().size());
   worker_.refreshSnapshot(*shared_.team);
   return true;

@@ -1,5 +1,7 @@
 #include "detector_tuning.hpp"
 
+#include <dynamic_reconfigure/ConfigDescription.h>
+
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/params/parameters.hpp"
 #include "mild_lcd/ros/tuning_config.hpp"
@@ -7,27 +9,54 @@
 namespace mild_lcd {
 
 DetectorTuning::DetectorTuning(const ros::NodeHandle& pnh, const std::string& log_name, SharedDetector& shared)
-    : log_name_(log_name), shared_(shared) {
-  // The server advertises set_parameters as it is constructed, with the cfg's defaults and no
-  // callback yet: a request in that window would be answered and then lost. Holding the server's
-  // own mutex until it holds the node's values and its callback makes such a request wait instead.
-  boost::recursive_mutex::scoped_lock ready(mutex_);
-  server_ =
-      std::make_unique<dynamic_reconfigure::Server<mild_lcd::TuningConfig>>(mutex_, ros::NodeHandle(pnh, "tuning"));
+    : log_name_(log_name), shared_(shared), nh_(pnh, "tuning") {
   {
-    std::lock_guard<std::mutex> lock(shared_.mutex);
-    server_->updateConfig(tuningConfigOf(shared_.team->params()));  // not the cfg's defaults
+    const auto lock = shared_.lock();
+    latest_ = shared_.team->params();
   }
-  server_->setCallback([this](mild_lcd::TuningConfig& config, uint32_t level) { apply(config, level); });
+  config_ = tuningConfigOf(latest_);  // not the cfg's defaults
+  descriptions_ = nh_.advertise<dynamic_reconfigure::ConfigDescription>("parameter_descriptions", 1, true);
+  descriptions_.publish(mild_lcd::TuningConfig::__getDescriptionMessage__());  // with bounds and defaults
+  updates_ = nh_.advertise<dynamic_reconfigure::Config>("parameter_updates", 1, true);
+  publish();
+  // Last: a request can only come once the node's values are in place.
+  set_service_ = nh_.advertiseService("set_parameters", &DetectorTuning::set, this);
 }
 
-void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
-  std::lock_guard<std::mutex> lock(shared_.mutex);
-  mild::RobotTeam& team = *shared_.team;
+bool DetectorTuning::set(dynamic_reconfigure::Reconfigure::Request& request,
+                         dynamic_reconfigure::Reconfigure::Response& response) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const std::string unread = unreadTuningEntries(request.config);
+  if (!unread.empty()) {
+    ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure request refused, values kept: " << unread);
+  } else {
+    mild_lcd::TuningConfig next = config_;
+    next.__fromMessage__(request.config);
+    dynamic_reconfigure::Config asked, clamped;
+    next.__toMessage__(asked);
+    next.__clamp__();
+    next.__toMessage__(clamped);
+    if (!(asked == clamped)) {
+      ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure: values outside the cfg's bounds were clamped to them");
+    }
+    apply(next);
+    config_ = next;
+  }
+  publish();
+  config_.__toMessage__(response.config);
+  return true;
+}
+
+// Runs on the nodelet's callback queue, beside its diagnostics: it never waits for the detector,
+// which a merge or a save may hold for seconds. The values are validated here, against the latest
+// accepted ones, and applied by SharedDetector before the next keyframe.
+void DetectorTuning::apply(mild_lcd::TuningConfig& config) {
   try {
-    const mild::DetectorParams next = paramsFromTuning(config, team.params());
-    if (mild::describeParameters(next) == mild::describeParameters(team.params())) return;
-    team.retune(next);
+    mild::DetectorParams next = paramsFromTuning(config, latest_);
+    next.validate();
+    if (mild::describeParameters(next) == mild::describeParameters(latest_)) return;
+    shared_.requestRetune(next);
+    latest_ = next;
     ROS_INFO_STREAM_NAMED(log_name_, "retuned: max_candidates " << next.candidates.max_candidates << ", exclusion "
                                                                 << next.candidates.exclusion_frames
                                                                 << " keyframes, decision probability "
@@ -35,8 +64,15 @@ void DetectorTuning::apply(mild_lcd::TuningConfig& config, uint32_t) {
                                                                 << next.verification.min_inliers);
   } catch (const mild::InvalidInput& e) {
     ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure change refused, values kept: " << e.what());
-    config = tuningConfigOf(team.params());  // the server answers and publishes what holds
+    config = tuningConfigOf(latest_);  // the answer and parameter_updates carry what holds
   }
+}
+
+void DetectorTuning::publish() {
+  config_.__toServer__(nh_);
+  dynamic_reconfigure::Config msg;
+  config_.__toMessage__(msg);
+  updates_.publish(msg);
 }
 
 }  // namespace mild_lcd

@@ -6,8 +6,9 @@
 
 namespace mild_lcd {
 
-KeyframeWorker::KeyframeWorker(SharedDetector& shared, size_t queue_size, uint64_t max_image_pixels, Hooks hooks)
-    : shared_(shared), queue_(queue_size), max_image_pixels_(max_image_pixels), hooks_(std::move(hooks)) {}
+KeyframeWorker::KeyframeWorker(SharedDetector& shared, size_t queue_size, size_t queue_bytes, const InputLimits& limits,
+                               Hooks hooks)
+    : shared_(shared), queue_(queue_size, queue_bytes), limits_(limits), hooks_(std::move(hooks)) {}
 
 KeyframeWorker::~KeyframeWorker() { stop(); }
 
@@ -15,7 +16,33 @@ void KeyframeWorker::start() {
   if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
 }
 
-bool KeyframeWorker::push(KeyframeInput input) { return queue_.push(std::move(input)); }
+KeyframeWorker::Pushed KeyframeWorker::push(KeyframeInput input) {
+  const std_msgs::Header& header = input.image        ? input.image->header
+                                   : input.compressed ? input.compressed->header
+                                                      : input.keyframe->header;
+  size_t bytes = 0;
+  try {
+    bytes = input.image        ? checkedInputBytes(*input.image, limits_)
+            : input.compressed ? checkedInputBytes(*input.compressed, limits_)
+                               : checkedInputBytes(*input.keyframe, limits_);
+    if (bytes > queue_.capacityBytes()) {
+      throw mild::InvalidInput("a message of " + std::to_string(bytes) + " bytes is larger than the whole queue (" +
+                               std::to_string(queue_.capacityBytes()) + " bytes, ~queue_mb)");
+    }
+  } catch (const std::exception& e) {
+    reject(header, e.what());
+    return Pushed::kRejected;  // the message is released as the caller returns
+  }
+  return queue_.push(std::move(input), bytes) ? Pushed::kQueued : Pushed::kDroppedOldest;
+}
+
+void KeyframeWorker::reject(const std_msgs::Header& header, const std::string& why) {
+  {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++stats_.rejected;
+  }
+  if (hooks_.warn) hooks_.warn("rejected keyframe (stamp " + std::to_string(header.stamp.toSec()) + "): " + why);
+}
 
 size_t KeyframeWorker::discardPending() {
   const size_t n = queue_.clear();
@@ -63,14 +90,14 @@ void KeyframeWorker::process(const KeyframeInput& input) {
     std::optional<uint64_t> id;
     mild::Features features;
     if (input.image || input.compressed) {
-      out.image = input.image ? imageFromMsg(*input.image, max_image_pixels_)
-                              : imageFromMsg(*input.compressed, max_image_pixels_);
+      out.image = input.image ? imageFromMsg(*input.image, limits_.max_image_pixels)
+                              : imageFromMsg(*input.compressed, limits_.max_image_pixels);
     } else {
       if (input.keyframe->has_id) id = input.keyframe->id;
       features = featuresFromMsg(*input.keyframe);
     }
     const bool keypoints = hooks_.wants_keypoints && hooks_.wants_keypoints();
-    std::lock_guard<std::mutex> lock(shared_.mutex);
+    const auto lock = shared_.lock();
     mild::RobotTeam& team = *shared_.team;
     if (input.robot < shared_.failure.size() && !shared_.failure[input.robot].empty()) {
       throw mild::InvalidInput(shared_.failure[input.robot]);
@@ -79,6 +106,7 @@ void KeyframeWorker::process(const KeyframeInput& input) {
     out.result = out.image.image.empty() ? team.process(input.robot, std::move(features), out.header.stamp.toSec(), id)
                                          : team.process(input.robot, out.image.image, out.image.format,
                                                         out.header.stamp.toSec(), std::nullopt, input.camera);
+    ++shared_.changes;
     out.database_size = team.robot(input.robot).size();
     if (keypoints) {
       out.query_keypoints = team.robot(input.robot).record(out.result.query_index).keypoints;
@@ -99,13 +127,7 @@ void KeyframeWorker::process(const KeyframeInput& input) {
       malloc_trim(0);
     }
   } catch (const std::exception& e) {
-    {
-      std::lock_guard<std::mutex> lock(stats_mutex_);
-      ++stats_.rejected;
-    }
-    if (hooks_.warn) {
-      hooks_.warn("rejected keyframe (stamp " + std::to_string(out.header.stamp.toSec()) + "): " + e.what());
-    }
+    reject(out.header, e.what());
     return;
   }
   {
@@ -138,6 +160,8 @@ WorkerCounters KeyframeWorker::counters() const {
   c.discarded = discarded_.load();
   c.queued = queue_.size();
   c.capacity = queue_.capacity();
+  c.queued_bytes = queue_.bytes();
+  c.capacity_bytes = queue_.capacityBytes();
   return c;
 }
 

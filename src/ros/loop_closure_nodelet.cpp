@@ -27,8 +27,10 @@
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
+#include "mild_lcd/ros/periodic_task.hpp"
 #include "mild_lcd/ros/ros_parameter_source.hpp"
 #include "robot_inputs.hpp"
+#include "sigterm_shutdown.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -58,7 +60,10 @@ void shutdownMessage(const std::string& name, const std::string& text, bool warn
 
 class LoopClosureNodelet : public nodelet::Nodelet {
  public:
-  ~LoopClosureNodelet() override { shutdown(); }
+  ~LoopClosureNodelet() override {
+    shutdown();
+    sigterm_.reset();  // after the save: a SIGTERM meanwhile still means "shut down in order"
+  }
 
  private:
   // What the node keeps per robot: its inputs, its output, its maps and their services. A node
@@ -108,8 +113,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     hooks.publish = [this](const ProcessedKeyframe& k) { publish(k); };
     hooks.wants_keypoints = [this] { return debug_pub_.getNumSubscribers() > 0; };
     hooks.warn = [this](const std::string& what) { NODELET_WARN_THROTTLE(2.0, "%s", what.c_str()); };
+    InputLimits limits;
+    limits.max_image_pixels = static_cast<uint64_t>(settings_.max_image_pixels);
+    limits.max_keyframe_features = static_cast<size_t>(settings_.max_keyframe_features);
     worker_ = std::make_unique<KeyframeWorker>(shared_, static_cast<size_t>(settings_.queue_size),
-                                               static_cast<uint64_t>(settings_.max_image_pixels), std::move(hooks));
+                                               static_cast<size_t>(settings_.queue_mb) << 20, limits, std::move(hooks));
 
     transport_ = std::make_unique<image_transport::ImageTransport>(nh);
     debug_pub_ = transport_->advertise("debug_image", 1);
@@ -124,6 +132,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     diagnostics_ = std::make_unique<DetectorDiagnostics>(nh, pnh, getName(), shared_, *worker_);
     tuning_ = std::make_unique<DetectorTuning>(pnh, getName(), shared_);
     worker_->start();  // loads ~database_path first when ~load_on_start, then keyframes
+    if (settings_.save_on_shutdown && settings_.autosave_period > 0) {
+      autosave_ =
+          std::make_unique<PeriodicTask>(std::chrono::seconds(settings_.autosave_period), [this] { autosave(); });
+    }
+    sigterm_ = std::make_unique<SigtermAsShutdown>();
 
     for (size_t r = 0; r < robots_.size(); ++r) {
       robots_[r]->inputs = std::make_unique<RobotInputs>(robots_[r]->nh, pnh, r, settings_, getName(),
@@ -139,13 +152,17 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         settings_.use_keyframe_input ? "keyframe input" : "", params.features.type.c_str(),
         params.features.descriptorBytes(), params.candidates.exclusion_frames,
         params.verification.enabled ? "on" : "off", robots_.front()->store->directory().c_str());
+    const std::string cost = extractionCostWarning(settings_, params.features.type);
+    if (!cost.empty()) NODELET_WARN("%s", cost.c_str());
   }
 
   // Callbacks only queue: the nodelet manager's threads are never held up by detection.
   void enqueue(KeyframeInput item) {
-    if (!worker_->push(std::move(item))) {
-      NODELET_WARN_THROTTLE(2.0, "input queue full (queue_size %d): dropped the oldest keyframe, %zu dropped so far",
-                            settings_.queue_size, worker_->counters().dropped);
+    if (worker_->push(std::move(item)) == KeyframeWorker::Pushed::kDroppedOldest) {
+      NODELET_WARN_THROTTLE(2.0,
+                            "input queue full (queue_size %d, queue_mb %d): dropped the oldest keyframe, %zu dropped "
+                            "so far",
+                            settings_.queue_size, settings_.queue_mb, worker_->counters().dropped);
     }
   }
 
@@ -165,6 +182,18 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       }
     }
     if (failed) throw mild::IoError("a map failed to load at start-up");
+  }
+
+  // ~autosave_period: what SIGKILL, a crash or a power cut would lose is bounded by the period.
+  void autosave() {
+    for (const auto& robot : robots_) {
+      try {
+        const std::string message = robot->store->autosave(shared_);
+        if (!message.empty()) NODELET_DEBUG("autosave: %s", message.c_str());
+      } catch (const std::exception& e) {
+        NODELET_WARN_THROTTLE(60.0, "autosave failed (the previous file is kept): %s", e.what());
+      }
+    }
   }
 
   // Runs on the worker thread, without the detector lock.
@@ -198,6 +227,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     for (const auto& robot : robots_) {
       if (robot->services) robot->services->shutdown();
     }
+    autosave_.reset();  // waits for a save in progress; the last save follows
     if (worker_) {
       const size_t waiting = worker_->counters().queued;
       worker_->stop();
@@ -238,6 +268,8 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   ros::Publisher all_pub_;
   std::unique_ptr<DetectorDiagnostics> diagnostics_;
   std::unique_ptr<DetectorTuning> tuning_;
+  std::unique_ptr<PeriodicTask> autosave_;
+  std::unique_ptr<SigtermAsShutdown> sigterm_;
 };
 
 }  // namespace mild_lcd

@@ -29,22 +29,37 @@ void visitSettings(Settings& s, Visit&& visit) {
   visit("publish_correspondences", s.publish_correspondences, Bounds::any(),
         "add each verified candidate's inlier matches (keypoint indices and pixels) to `loop_closure`");
   visit("queue_size", s.queue_size, Bounds::in(1, 100000),
-        "keyframes waiting for the worker; when full the oldest is dropped and counted");
+        "keyframes waiting for the worker; when full the oldest is dropped and counted (roscpp's queue of each input "
+        "has the same length)");
+  visit("queue_mb", s.queue_mb, Bounds::in(1, 1 << 20),
+        "and at most this many megabytes of messages waiting (a message larger than that is rejected)");
   visit("debug_image_cache", s.debug_image_cache, Bounds::in(0, 1000000),
         "keyframes kept at half resolution for `debug_image` (0 = none)");
   visit("debug_image_cache_mb", s.debug_image_cache_mb, Bounds::in(0, 1 << 20),
         "and at most this many megabytes of them");
   visit("max_image_pixels", s.max_image_pixels, Bounds::in(1, 1 << 30),
-        "larger images (width x height) are refused before decoding");
+        "larger images (width x height) are refused before decoding; also bounds their bytes: a raw image's data "
+        "(exactly step x height) at most this many pixels of its encoding, a compressed one (JPEG or PNG only, judged "
+        "on its header) at most 4 bytes per pixel of it");
+  visit("max_keyframe_features", s.max_keyframe_features, Bounds::in(1, 1000000),
+        "`Keyframe` messages with more keypoints are refused (they would be stored, and matched whole)");
   visit("database_dir", s.database_dir, Bounds::any(),
         "the only folder maps are saved to and loaded from (default: database_path's folder, else $ROS_HOME/mild_lcd)");
   visit("database_path", s.database_path, Bounds::any(),
         "map file inside database_dir: default of the services, and of load_on_start/save_on_shutdown");
   visit("load_on_start", s.load_on_start, Bounds::any(), "load database_path at start-up, as a new session");
   visit("save_on_shutdown", s.save_on_shutdown, Bounds::any(),
-        "save to database_path on shutdown (never after a failed start-up load)");
+        "save to database_path on shutdown: SIGINT, SIGTERM, unload (never after a failed start-up load)");
+  visit("autosave_period", s.autosave_period, Bounds::in(0, 86400),
+        "with save_on_shutdown, also save database_path every this many seconds when the map changed (0 = on "
+        "shutdown only): SIGKILL, a crash or a power cut loses at most this much");
   visit("max_database_mb", s.max_database_mb, Bounds::in(1, 1 << 24),
         "database files larger than this are refused unread");
+  visit("max_database_files", s.max_database_files, Bounds::in(1, 1000000),
+        "a save that would add a file or folder to database_dir is refused once it holds this many (names may be "
+        "at most 8 folders deep)");
+  visit("max_database_dir_mb", s.max_database_dir_mb, Bounds::in(1, 1 << 30),
+        "a save is refused once the files in database_dir (but the one it replaces) hold this many megabytes");
   visit("max_match_features", s.max_match_features, Bounds::in(1, 10000000),
         "descriptors per side of a sparse_match request, at most");
   visit("robots", s.robots, Bounds::any(),
@@ -151,6 +166,16 @@ std::vector<std::string> NodeSettings::robotNames() const {
     }
   }
   return names;
+}
+
+std::string extractionCostWarning(const NodeSettings& settings, const std::string& feature_type) {
+  constexpr int kCheapPixels = 2048 * 2048;
+  if (feature_type == "orb" || !settings.use_image_input || settings.max_image_pixels <= kCheapPixels) return "";
+  return "features/type " + feature_type + " on images of up to ~max_image_pixels (" +
+         std::to_string(settings.max_image_pixels) +
+         ") pixels: extraction grows with the pixels and the keypoints found (AKAZE on noise: 2048 x 2048 took 3 s "
+         "and 400 MB, 4096 x 4096 168 s and 1.9 GB), holding the worker meanwhile. Set ~max_image_pixels to the "
+         "largest image expected";
 }
 
 void rejectUnknownParameters(const mild::ParameterSource& source) {

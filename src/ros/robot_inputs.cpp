@@ -11,17 +11,20 @@ namespace mild_lcd {
 
 RobotInputs::RobotInputs(ros::NodeHandle& nh, ros::NodeHandle& pnh, size_t robot, const NodeSettings& settings,
                          const std::string& log_name, Enqueue enqueue)
-    : robot_(robot), settings_(settings), log_name_(log_name), enqueue_(std::move(enqueue)) {
-  transport_ = std::make_unique<image_transport::ImageTransport>(nh);
-  if (settings_.use_image_input && settings_.use_camera_info) subscribeCameraInfo(nh);
-  if (settings_.use_image_input) subscribeImages(nh, pnh);
+    : robot_(robot), settings_(settings), log_name_(log_name), enqueue_(std::move(enqueue)), nh_(nh) {
+  nh_.setCallbackQueue(&queue_);
+  transport_ = std::make_unique<image_transport::ImageTransport>(nh_);
+  if (settings_.use_image_input && settings_.use_camera_info) subscribeCameraInfo(nh_);
+  if (settings_.use_image_input) subscribeImages(nh_, pnh);
   if (settings_.use_keyframe_input) {
-    keyframe_sub_ =
-        nh.subscribe<mild_lcd::Keyframe>("keyframe", settings_.queue_size, [this](const mild_lcd::KeyframeConstPtr& m) {
-          enqueue_({nullptr, nullptr, m, {}, robot_});
-        });
+    keyframe_sub_ = nh_.subscribe<mild_lcd::Keyframe>("keyframe", settings_.queue_size,
+                                                      [this](const mild_lcd::KeyframeConstPtr& m) {
+                                                        enqueue_({nullptr, nullptr, m, {}, robot_});
+                                                      });
     ROS_INFO_STREAM_NAMED(log_name_, "subscribed to " << keyframe_sub_.getTopic() << " (keyframe features)");
   }
+  spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
+  spinner_->start();
 }
 
 void RobotInputs::shutdown() {
@@ -29,6 +32,8 @@ void RobotInputs::shutdown() {
   camera_info_sub_.shutdown();
   compressed_sub_.shutdown();
   keyframe_sub_.shutdown();
+  if (spinner_) spinner_->stop();  // waits for a callback in progress
+  spinner_.reset();
 }
 
 // image_transport's `compressed` plugin is not packaged for Debian's ROS; without it the compressed

@@ -1,8 +1,11 @@
 #pragma once
 
 // One robot's inputs: `image` (image_transport, with camera_info beside it) and `keyframe`, in the
-// robot's namespace (the node's own for a node serving one robot). Callbacks only queue the
-// keyframe, tagged with the robot, for the worker: the nodelet manager's threads are never held up.
+// robot's namespace (the node's own for a node serving one robot). Their callbacks run on a
+// callback queue and thread of their own, not on the nodelet's queue, which also serves live tuning
+// and diagnostics: nothing else can hold them up, so roscpp's subscriber queue is emptied as fast as
+// messages arrive, and only the worker's queue, which counts what it drops, can overflow. Callbacks
+// only queue the keyframe, tagged with the robot, for the worker; they never wait for the detector.
 
 #include <functional>
 #include <memory>
@@ -10,6 +13,7 @@
 #include <string>
 
 #include <image_transport/image_transport.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 
 #include "mild_lcd/ros/keyframe_worker.hpp"
@@ -40,6 +44,9 @@ class RobotInputs {
   const NodeSettings& settings_;
   std::string log_name_;
   Enqueue enqueue_;
+  ros::CallbackQueue queue_;  // the inputs' own; declared before what uses it, so destroyed after
+  ros::NodeHandle nh_;        // the robot's namespace, on queue_
+  std::unique_ptr<ros::AsyncSpinner> spinner_;
   // Declared before the subscribers that use its plugins, so destroyed after them.
   std::unique_ptr<image_transport::ImageTransport> transport_;
   image_transport::Subscriber image_sub_;

@@ -25,6 +25,28 @@ std::string parameterName(const std::string& tuning_name) {
   throw mild::InvalidInput("dynamic_reconfigure parameter '" + tuning_name + "' is not a runtime parameter");
 }
 
+std::string unreadTuningEntries(const dynamic_reconfigure::Config& request) {
+  std::string problems;
+  const auto check = [&](const std::string& name, const char* type) {
+    std::string expected;
+    for (const auto& d : mild_lcd::TuningConfig::__getParamDescriptions__()) {
+      if (d->name == name) expected = d->type;
+    }
+    std::string problem;
+    if (expected.empty()) {
+      problem = "'" + name + "' is not a tuning parameter";
+    } else if (expected != type) {
+      problem = "'" + name + "' takes " + expected + " values, not " + type;
+    }
+    if (!problem.empty()) problems += (problems.empty() ? "" : "; ") + problem;
+  };
+  for (const auto& p : request.bools) check(p.name, "bool");
+  for (const auto& p : request.ints) check(p.name, "int");
+  for (const auto& p : request.strs) check(p.name, "str");
+  for (const auto& p : request.doubles) check(p.name, "double");
+  return problems;
+}
+
 mild_lcd::TuningConfig tuningConfigOf(const mild::DetectorParams& params) {
   std::map<std::string, std::string> values;
   for (const auto& [name, value] : mild::describeParameters(params)) values[tuningName(name)] = value;

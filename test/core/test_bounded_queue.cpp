@@ -84,5 +84,26 @@ TEST(BoundedQueue, ClearEmptiesWithoutCountingDrops) {
   EXPECT_EQ(q.dropped(), 0u);
 }
 
+// Bounded in bytes as well as items: a few large items push out older ones until the new one fits.
+TEST(BoundedQueue, IsBoundedInBytesToo) {
+  BoundedQueue<int> q(100, 1000);
+  EXPECT_TRUE(q.push(1, 400));
+  EXPECT_TRUE(q.push(2, 400));
+  EXPECT_EQ(q.bytes(), 800u);
+  EXPECT_FALSE(q.push(3, 400)) << "1 goes to make room";
+  EXPECT_EQ(q.dropped(), 1u);
+  EXPECT_EQ(q.bytes(), 800u);
+  EXPECT_FALSE(q.push(4, 1000)) << "2 and 3 go";
+  EXPECT_EQ(q.dropped(), 3u);
+  EXPECT_EQ(q.size(), 1u);
+  EXPECT_EQ(*q.pop(), 4);
+  q.done();
+  EXPECT_EQ(q.bytes(), 0u);
+  EXPECT_TRUE(q.push(5, 10));
+  EXPECT_TRUE(q.push(6, 10));
+  EXPECT_EQ(q.clear(), 2u);
+  EXPECT_EQ(q.bytes(), 0u);
+}
+
 }  // namespace
 }  // namespace mild

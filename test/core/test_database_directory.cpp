@@ -93,5 +93,51 @@ TEST_F(Confinement, TheFolderItselfMayBeALink) {
   EXPECT_EQ(dir.resolve("map.db").display(), root_ + "/map.db");
 }
 
+// A hard link planted in the folder is a second name of a file anywhere on the same file system:
+// it is refused when opened, and the file it names is not read.
+TEST_F(Confinement, HardLinksAreRefusedWhenOpened) {
+  const DatabaseDirectory dir(root_);
+  std::ofstream(base_ / "outside" / "secret") << "not for clients";
+  ASSERT_EQ(::link((base_ / "outside" / "secret").c_str(), (root_ + "/planted.db").c_str()), 0);
+  unsigned long long size = 0;
+  try {
+    dir.resolve("planted.db").openForReading(size);
+    ADD_FAILURE() << "a hard link to a file outside was opened";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("hard links"), std::string::npos) << e.what();
+  }
+  std::ofstream(root_ + "/own.db") << "a map";
+  const int fd = dir.resolve("own.db").openForReading(size);
+  EXPECT_GE(fd, 0) << "a file of its own opens";
+  EXPECT_EQ(size, 5u);
+  ::close(fd);
+}
+
+// Saves may not build unbounded trees or fill the disk: names are at most max_depth folders deep,
+// and a save that adds a file or folder is refused once the folder holds max_entries of them or its
+// files hold max_bytes; replacing a file is always allowed.
+TEST_F(Confinement, SavesAreBoundedInDepthEntriesAndBytes) {
+  const DatabaseDirectory dir(root_, DirectoryLimits{3, 6, 1000});
+  expectRefused(dir, "a/b/c/d/map.db", "4 folders deep; at most 3");
+  std::string deep;
+  for (int i = 0; i < 2000; ++i) deep += "d/";
+  expectRefused(dir, deep + "map.db", "folders deep");
+  EXPECT_FALSE(fs::exists(root_ + "/a")) << "a refused save makes no folder";
+  EXPECT_NO_THROW(dir.resolve("a/b/c/map.db", true)) << "3 deep is fine";  // 3 folders: 3 entries
+  std::ofstream(root_ + "/a/b/c/map.db") << "x";                           // 4
+  std::ofstream(root_ + "/one.db") << "x";                                 // 5
+  EXPECT_NO_THROW(dir.resolve("two.db", true));                            // the 6th entry fits
+  std::ofstream(root_ + "/two.db") << "x";
+  expectRefused(dir, "three.db", "~max_database_files");
+  expectRefused(dir, "e/f.db", "~max_database_files");
+  EXPECT_NO_THROW(dir.resolve("one.db", true)) << "replacing adds nothing";
+  EXPECT_NO_THROW(dir.resolve("three.db", false)) << "loading is not saving";
+
+  const DatabaseDirectory small(root_, DirectoryLimits{3, 100, 1000});
+  std::ofstream(root_ + "/big.db") << std::string(1000, 'x');
+  expectRefused(small, "new.db", "~max_database_dir_mb");
+  EXPECT_NO_THROW(small.resolve("big.db", true)) << "the file replaced does not count";
+}
+
 }  // namespace
 }  // namespace mild

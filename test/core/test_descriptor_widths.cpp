@@ -153,6 +153,33 @@ TEST(KeyframeWidths, AKeyframeOfAnotherWidthIsRefusedAndChangesNothing) {
   EXPECT_EQ(brisk.size(), 2u);
 }
 
+// A keyframe without descriptors has no descriptor to judge: it is judged on the width its sender
+// declared (a Keyframe's descriptor_bytes: 64 with 0 keypoints used to be stored by a 32-byte node).
+TEST(KeyframeWidths, AnEmptyKeyframeIsJudgedOnTheWidthItDeclares) {
+  LoopDetector orb(paramsFor("orb"));
+  Features empty;
+  empty.declared_bytes = 64;
+  try {
+    orb.process(empty, 1.0);
+    FAIL() << "an empty 64-byte keyframe entered a 32-byte database";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("64 bytes wide; this database holds 32-byte"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(orb.size(), 0u);
+  EXPECT_EQ(orb.nextId(), 0u);
+  empty.declared_bytes = 32;
+  EXPECT_NO_THROW(orb.process(empty, 2.0)) << "an empty keyframe of the right width is a keyframe";
+  empty.declared_bytes = 0;
+  EXPECT_NO_THROW(orb.process(empty, 3.0)) << "nothing declared: nothing to judge";
+  std::mt19937_64 rng(5);
+  Features declared_wrong;  // 32-byte descriptors declared as 64
+  declared_wrong.descriptors = test::randomDescriptors(5, rng, 32);
+  declared_wrong.keypoints.assign(5, cv::KeyPoint(10.0f, 10.0f, 7.0f));
+  declared_wrong.declared_bytes = 64;
+  EXPECT_THROW(orb.process(declared_wrong, 4.0), InvalidInput);
+  EXPECT_EQ(orb.size(), 2u);
+}
+
 TEST(KeyframeWidths, ADatabaseOfAFrontEndsOwnWidthTakesKeyframesButRefusesImages) {
   DetectorParams p = paramsFor("orb");
   p.features.descriptor_bytes = 16;  // BRIEF-16 from a front-end

@@ -62,6 +62,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         const size_t depths = in.ConsumeBool() ? n : in.ConsumeIntegralInRange<size_t>(0, 70);
         for (size_t i = 0; i < depths; ++i) msg.depths.push_back(in.ConsumeFloatingPoint<float>());
       }
+      mild_lcd::checkedInputBytes(msg, mild_lcd::InputLimits{});  // as the node does when it queues one
       const mild::Features f = mild_lcd::featuresFromMsg(msg);
       std::optional<uint64_t> id;
       if (msg.has_id) id = msg.id;
@@ -75,7 +76,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       msg.height = in.ConsumeIntegralInRange<uint32_t>(0, 96);
       msg.step = in.ConsumeIntegralInRange<uint32_t>(0, 400);
       msg.is_bigendian = in.ConsumeBool();
+      const bool exact = in.ConsumeBool();  // mostly exactly step x height, as an image must be
       msg.data = in.ConsumeRemainingBytes<uint8_t>();
+      if (exact) msg.data.resize(static_cast<size_t>(msg.step) * msg.height);
       const mild_lcd::DecodedImage image = mild_lcd::imageFromMsg(msg);
       detector(which).process(image.image, image.format, 0.0);
     }

@@ -256,6 +256,125 @@ TEST(Persistence, LoadOnStartAndSaveOnShutdown) {
   fs::remove_all(scratch());
 }
 
+// A mild_lcd with keyframe input in `ns`, saving to `map`: a nodelet manager of our own and a loader
+// that loads the nodelet into it (rosrun execs the manager itself: the pid is the manager's), or the
+// standalone node.
+struct RunningNode {
+  pid_t process = -1, loader = -1;  // the manager or the node; the loader (none for the node)
+
+  RunningNode(const std::string& ns, const std::string& map, int autosave_period, bool in_manager) {
+    const std::string ns_arg = "__ns:=" + ns, path_arg = "_database_path:=" + map,
+                      period_arg = "_autosave_period:=" + std::to_string(autosave_period),
+                      manager_name = ns + "/manager";
+    process = fork();
+    if (process == 0) {
+      if (in_manager) {
+        execlp("rosrun", "rosrun", "nodelet", "nodelet", "manager", "__name:=manager", ns_arg.c_str(),
+               static_cast<char*>(nullptr));
+      } else {
+        execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", path_arg.c_str(),
+              "_save_on_shutdown:=true", "_use_image_input:=false", period_arg.c_str(), static_cast<char*>(nullptr));
+      }
+      _exit(127);
+    }
+    if (!in_manager) return;
+    loader = fork();
+    if (loader == 0) {
+      execlp("rosrun", "rosrun", "nodelet", "nodelet", "load", "mild_lcd/LoopClosureNodelet", manager_name.c_str(),
+             ns_arg.c_str(), "__name:=mild_lcd", path_arg.c_str(), "_save_on_shutdown:=true", "_use_image_input:=false",
+             period_arg.c_str(), static_cast<char*>(nullptr));
+      _exit(127);
+    }
+  }
+  // Feeds `count` keyframes and waits for their answers; returns how many were answered.
+  static size_t feed(const std::string& ns, int count) {
+    ros::NodeHandle nh;
+    ros::Publisher keyframes = nh.advertise<mild_lcd::Keyframe>(ns + "/keyframe", 100);
+    TopicLog<mild_lcd::LoopClosure> outputs(ns + "/loop_closure");
+    EXPECT_TRUE(outputs.waitForPublisher(30.0));
+    EXPECT_TRUE(waitForSubscriber(keyframes, 30.0));
+    cv::RNG rng(3);
+    for (int i = 0; i < count; ++i) {
+      mild_lcd::Keyframe kf;
+      kf.header.stamp = ros::Time(3000.0 + i);
+      kf.keypoints.resize(50);
+      for (auto& p : kf.keypoints) p.x = p.y = static_cast<float>(rng.uniform(0, 200));
+      kf.descriptors.resize(50 * 32);
+      for (auto& b : kf.descriptors) b = static_cast<uint8_t>(rng.uniform(0, 256));
+      keyframes.publish(kf);
+    }
+    EXPECT_TRUE(outputs.waitForCount(static_cast<size_t>(count), 30.0));
+    return outputs.size();
+  }
+  // Sends `signal` to the manager or node; true when it exited within `timeout_s`.
+  bool stop(int signal, double timeout_s) { return stopProcess(process, signal, timeout_s); }
+
+  ~RunningNode() {
+    for (pid_t* pid : {&loader, &process}) {
+      if (*pid > 0 && !stopProcess(*pid, SIGINT, 20.0)) stopProcess(*pid, SIGKILL, 20.0);
+    }
+  }
+
+ private:
+  static bool stopProcess(pid_t& pid, int signal, double timeout_s) {
+    kill(pid, signal);
+    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
+    int status = 0;
+    while (ros::WallTime::now() < end) {
+      if (waitpid(pid, &status, WNOHANG) == pid) {
+        pid = -1;
+        return true;
+      }
+      ros::WallDuration(0.05).sleep();
+    }
+    return false;
+  }
+};
+
+// SIGINT (Ctrl-C, roslaunch) and SIGTERM (docker stop, systemd's default KillSignal, kill) stop the
+// standalone node and a nodelet manager in order: the map is saved. A nodelet manager does not
+// handle SIGTERM itself: it used to end at once, its nodelets never unloaded, nothing was saved.
+TEST(Persistence, SigintAndSigtermSaveTheMapInANodeletManagerAndTheNode) {
+  fs::create_directories(scratch());
+  for (const bool in_manager : {true, false}) {
+    for (const int signal : {SIGTERM, SIGINT}) {
+      const std::string what = std::string(in_manager ? "manager" : "node") + (signal == SIGTERM ? "_term" : "_int");
+      const std::string map = (scratch() / (what + ".mild")).string();
+      fs::remove(map);
+      RunningNode node("/" + what, map, 0, in_manager);  // no periodic save: the map must come from the stop
+      ASSERT_EQ(RunningNode::feed("/" + what, 3), 3u) << what;
+      EXPECT_FALSE(fs::exists(map)) << what << ": nothing saved before the signal";
+      ASSERT_TRUE(node.stop(signal, 20.0)) << what << " did not stop";
+      ASSERT_TRUE(fs::exists(map)) << what << " stopped and did not save";
+      EXPECT_EQ(mild::readDetectorFile(map).records.size(), 3u) << what;
+    }
+  }
+}
+
+// SIGKILL cannot be handled: with ~save_on_shutdown the map is also saved every ~autosave_period
+// seconds when it changed, so at most that period is lost.
+TEST(Persistence, AutosaveBoundsWhatSigkillLoses) {
+  fs::create_directories(scratch());
+  const std::string map = (scratch() / "sigkill.mild").string();
+  fs::remove(map);
+  RunningNode node("/sigkill", map, 1, true);
+  ASSERT_EQ(RunningNode::feed("/sigkill", 5), 5u);
+  size_t saved = 0;
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(30.0);
+  while (saved < 5 && ros::WallTime::now() < end) {
+    ros::WallDuration(0.2).sleep();
+    try {
+      saved = fs::exists(map) ? mild::readDetectorFile(map).records.size() : 0;
+    } catch (const std::exception&) {
+      saved = 0;  // never half a file: saves are renamed into place; an error here is a failure below
+    }
+  }
+  EXPECT_EQ(saved, 5u) << "no periodic save within 30 s of a 1 s period";
+  ASSERT_TRUE(node.stop(SIGKILL, 20.0));
+  ASSERT_TRUE(fs::exists(map));
+  EXPECT_EQ(mild::readDetectorFile(map).records.size(), 5u) << "what the last periodic save held";
+}
+
 // A corrupt map at start-up: the node says why (naming the file), refuses keyframes rather than
 // learning a new map on nothing, and does not write over the file when it stops.
 TEST(Persistence, AMapThatFailsToLoadAtStartUpIsNeverOverwritten) {

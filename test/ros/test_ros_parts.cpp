@@ -11,6 +11,7 @@
 #include <fstream>
 #include <limits>
 #include <set>
+#include <thread>
 
 #include <sensor_msgs/image_encodings.h>
 #include <boost/make_shared.hpp>
@@ -23,6 +24,7 @@
 #include "mild_lcd/ros/debug_image.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
+#include "mild_lcd/ros/periodic_task.hpp"
 #include "mild_lcd/ros/tuning_config.hpp"
 
 namespace fs = std::filesystem;
@@ -106,6 +108,40 @@ TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
             std::string::npos);
 }
 
+// dynamic_reconfigure's parsing skips entries it cannot place; the node names them and refuses the
+// request.
+TEST(Tuning, EntriesThatNameNoParameterOrHaveTheWrongTypeAreNamed) {
+  dynamic_reconfigure::Config request;
+  dynamic_reconfigure::IntParameter i;
+  i.name = "detector_max_candidates";
+  i.value = 2;
+  request.ints.push_back(i);
+  dynamic_reconfigure::DoubleParameter d;
+  d.name = "scoring_decision_probability";
+  d.value = 0.7;
+  request.doubles.push_back(d);
+  EXPECT_EQ(unreadTuningEntries(request), "");
+  EXPECT_EQ(unreadTuningEntries({}), "") << "an empty request (a get)";
+  d.name = "detector_max_candidates";  // an int parameter given as a double
+  request.doubles.push_back(d);
+  dynamic_reconfigure::BoolParameter b;
+  b.name = "index_num_tables";  // not a runtime parameter
+  request.bools.push_back(b);
+  const std::string problems = unreadTuningEntries(request);
+  EXPECT_NE(problems.find("'detector_max_candidates' takes int values, not double"), std::string::npos) << problems;
+  EXPECT_NE(problems.find("'index_num_tables' is not a tuning parameter"), std::string::npos) << problems;
+}
+
+// BRISK and AKAZE on images as large as ~max_image_pixels allows can hold the worker for minutes:
+// the node says so at start-up, unless the bound keeps images small or the input is features.
+TEST(NodeSettings, WarnsOfCostlyExtractionOnLargeImages) {
+  EXPECT_EQ(extractionCostWarning(settingsFrom(""), "orb"), "");
+  EXPECT_NE(extractionCostWarning(settingsFrom(""), "akaze").find("~max_image_pixels (16777216)"), std::string::npos);
+  EXPECT_NE(extractionCostWarning(settingsFrom(""), "brisk"), "");
+  EXPECT_EQ(extractionCostWarning(settingsFrom("max_image_pixels: 4194304\n"), "akaze"), "");
+  EXPECT_EQ(extractionCostWarning(settingsFrom("use_image_input: false\n"), "akaze"), "");
+}
+
 TEST(NodeSettings, TheReadmeTableIsTheDeclaration) {
   std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
   const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -155,6 +191,33 @@ class Store : public ::testing::Test {
   fs::path dir_;
 };
 
+// Live tuning never waits for the detector (a merge or a save may hold it for seconds; the
+// dynamic_reconfigure server shares the nodelet's callback queue): a retune that finds the lock
+// held waits for its holder, and is in force before anyone next reads the parameters.
+TEST(SharedDetectorRetune, NeverWaitsForTheDetectorAndHoldsBeforeItIsNextUsed) {
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
+  mild::DetectorParams next = shared.team->params();
+  ASSERT_NE(next.candidates.max_candidates, 1);
+  next.candidates.max_candidates = 1;
+  {
+    std::unique_lock<std::mutex> merging(shared.mutex);  // someone holds the detector
+    shared.requestRetune(next);                          // returns without waiting for it
+    EXPECT_TRUE(shared.retunePending());
+    EXPECT_NE(shared.team->params().candidates.max_candidates, 1);
+  }
+  {
+    const auto lock = shared.lock();  // the next user: the keyframe worker, a service
+    EXPECT_EQ(shared.team->params().candidates.max_candidates, 1);
+  }
+  EXPECT_FALSE(shared.retunePending());
+  next.candidates.max_candidates = 2;
+  shared.requestRetune(next);  // the detector is free: applied at once
+  EXPECT_FALSE(shared.retunePending());
+  EXPECT_EQ(shared.team->params().candidates.max_candidates, 2);
+  EXPECT_EQ(shared.team->retunes(), 2u);
+}
+
 // Any failure to load at start-up (here a map over ~max_database_mb: a CapacityError, not bad
 // input) leaves the file as it is and keeps save_on_shutdown from writing over it.
 TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
@@ -190,6 +253,41 @@ TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
   EXPECT_NE(store.loadOnStart(running).find("does not exist yet"), std::string::npos);
   EXPECT_NE(store.saveOnShutdown(running).find("saved 3 keyframes"), std::string::npos);
   EXPECT_EQ(mild::readDetectorFile((dir_ / "new.db").string()).records.size(), 3u);
+}
+
+// ~autosave_period: with save_on_shutdown, the map is written when it changed since it was last
+// written to ~database_path (by any save), and never after a failed start-up load.
+TEST_F(Store, AutosaveWritesTheMapOnlyWhenItChanged) {
+  DatabaseStore store(settings("database_path: auto.db\nsave_on_shutdown: true\n"));
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(detector(3)));
+  EXPECT_EQ(store.autosave(shared), "") << "nothing learnt since start-up";
+  EXPECT_FALSE(fs::exists(dir_ / "auto.db"));
+  ++shared.changes;  // as the worker does after each keyframe
+  EXPECT_NE(store.autosave(shared).find("saved 3 keyframes"), std::string::npos);
+  EXPECT_EQ(mild::readDetectorFile((dir_ / "auto.db").string()).records.size(), 3u);
+  EXPECT_EQ(store.autosave(shared), "") << "unchanged since";
+  ++shared.changes;
+  store.save(shared, "auto.db");  // the service, to ~database_path
+  EXPECT_EQ(store.autosave(shared), "") << "the service's save counts";
+  ++shared.changes;
+  store.save(shared, "elsewhere.db");
+  EXPECT_NE(store.autosave(shared), "") << "a save elsewhere does not";
+
+  DatabaseStore without(settings("database_path: off.db\n"));
+  EXPECT_EQ(without.autosave(shared), "") << "only with save_on_shutdown";
+  EXPECT_FALSE(fs::exists(dir_ / "off.db"));
+}
+
+TEST(PeriodicTask, RunsEveryPeriodUntilDestroyed) {
+  std::atomic<int> runs{0};
+  {
+    PeriodicTask task(std::chrono::milliseconds(10), [&] { ++runs; });
+    while (runs < 3) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  const int after = runs;
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(runs, after) << "no run after destruction";
 }
 
 TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {
@@ -236,7 +334,7 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
     ++published;
     throw std::runtime_error("a publisher that fails");  // not the keyframe's fault
   };
-  KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   worker.push({image(200, 150, 1.0), nullptr, nullptr, {}});
   worker.push({image(1, 1, 2.0), nullptr, nullptr, {}});           // thinner than ORB's border: stored, no features
@@ -257,7 +355,7 @@ TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   std::unique_lock<std::mutex> hold(gate);  // the first keyframe waits here until we let it go
   KeyframeWorker::Hooks hooks;
   hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
-  KeyframeWorker worker(shared, 100, 1000 * 1000, hooks);
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   for (int i = 0; i < 10; ++i) worker.push({image(160, 120, i), nullptr, nullptr, {}});
   while (worker.counters().queued > 9) std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -313,6 +411,151 @@ TEST(CompressedImages, AreJudgedByTheirHeaderBeforeDecoding) {
   msg.data = png;
   EXPECT_EQ(imageFromMsg(msg, 50 * 30).image.size(), cv::Size(50, 30));
   EXPECT_THROW(imageFromMsg(msg, 50 * 30 - 1), mild::InvalidInput);
+}
+
+// Formats whose header this node does not read are refused before any decoder sees them: OpenCV's
+// TIFF and WebP decoders allocate for the size their header claims (593 bytes of TIFF may claim
+// 20000 x 20000 pixels).
+TEST(CompressedImages, OnlyJpegAndPngAreDecoded) {
+  const cv::Mat small(8, 8, CV_8UC3, cv::Scalar(10, 20, 30));
+  sensor_msgs::CompressedImage msg;
+  for (const std::string ext : {".tiff", ".webp", ".bmp", ".ppm"}) {
+    if (!cv::haveImageWriter(ext)) continue;
+    ASSERT_TRUE(cv::imencode(ext, small, msg.data)) << ext;
+    msg.format = ext.substr(1);
+    const std::string error = errorOf([&] { imageFromMsg(msg); });
+    EXPECT_NE(error.find("not a JPEG or PNG"), std::string::npos) << ext << ": " << error;
+    EXPECT_NE(errorOf([&] { checkedInputBytes(msg, InputLimits{}); }), "") << ext;
+  }
+  ASSERT_TRUE(cv::imencode(".jpg", small, msg.data));
+  EXPECT_EQ(imageFromMsg(msg).image.size(), small.size());
+  // And at most 4 bytes per pixel of ~max_image_pixels, whatever the header says.
+  msg.data.resize(4 * 1000 + 1, 0);
+  EXPECT_NE(errorOf([&] { imageFromMsg(msg, 1000); }).find("larger than 4000"), std::string::npos);
+}
+
+// A raw image's data is exactly step x height, and its step cannot make it larger than
+// ~max_image_pixels pixels of its encoding: eight 320 x 240 images carrying 250 MB each took the
+// node from 79 MB to 2.3 GB.
+TEST(InputBounds, AnImagesDataIsExactlyStepTimesHeightAndBoundedInBytes) {
+  auto msg = image(320, 240, 1.0);
+  const InputLimits limits{640 * 480, 10000};
+  EXPECT_GE(checkedInputBytes(*msg, limits), 320u * 240u);
+  EXPECT_EQ(imageFromMsg(*msg, limits.max_image_pixels).image.size(), cv::Size(320, 240));
+  msg->data.resize(320 * 240 + 1);  // one byte more than declared
+  EXPECT_NE(errorOf([&] { imageFromMsg(*msg, limits.max_image_pixels); }).find("exactly step x height"),
+            std::string::npos);
+  EXPECT_NE(errorOf([&] { checkedInputBytes(*msg, limits); }), "");
+  msg->step = 320 * 1000;  // a step a thousand rows wide, and data to match: 76.8 MB
+  msg->data.assign(static_cast<size_t>(msg->step) * msg->height, 0);
+  EXPECT_NE(errorOf([&] { checkedInputBytes(*msg, limits); }).find("more than ~max_image_pixels"), std::string::npos);
+  msg = image(320, 240, 2.0);
+  msg->header.frame_id.assign(100 * 1024, 'x');  // everything besides the pixels is small
+  EXPECT_NE(errorOf([&] { checkedInputBytes(*msg, limits); }).find("besides its payload"), std::string::npos);
+}
+
+TEST(InputBounds, AKeyframeHasAtMostMaxKeyframeFeaturesAndSmallExtras) {
+  const InputLimits limits{kDefaultMaxImagePixels, 100};
+  mild_lcd::Keyframe kf;
+  kf.keypoints.resize(100);
+  kf.descriptors.assign(100 * 32, 1);
+  kf.depths.assign(100, 1.0f);
+  EXPECT_GE(checkedInputBytes(kf, limits), 100u * (24 + 32 + 4));
+  kf.keypoints.resize(101);
+  kf.descriptors.assign(101 * 32, 1);
+  EXPECT_NE(errorOf([&] { checkedInputBytes(kf, limits); }).find("~max_keyframe_features (100)"), std::string::npos);
+  kf.keypoints.resize(1);
+  kf.descriptors.assign(101 * 64 + 1, 1);  // descriptors of no keypoints
+  EXPECT_NE(errorOf([&] { checkedInputBytes(kf, limits); }), "");
+  kf.descriptors.assign(32, 1);
+  kf.depths.clear();
+  kf.camera_info.D.assign(1000000, 0.0);  // 8 MB of "distortion"
+  EXPECT_NE(errorOf([&] { checkedInputBytes(kf, limits); }).find("besides its payload"), std::string::npos);
+}
+
+// Oversize messages are rejected (counted) as they are pushed, so they are released at once; the
+// queue holds at most queue_bytes of messages, dropping (counting) the oldest to make room.
+TEST(Worker, TheQueueIsBoundedInBytesAndOversizeInputsAreRejectedAsTheyArrive) {
+  SharedDetector shared;
+  mild::DetectorParams p;
+  p.verification.enabled = false;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>(p)));
+  std::mutex gate;
+  std::unique_lock<std::mutex> hold(gate);  // the worker waits in its first publish until released
+  KeyframeWorker::Hooks hooks;
+  hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
+  KeyframeWorker worker(shared, 100, 200 * 1000, InputLimits{2000 * 2000, 10000}, hooks);
+  worker.start();
+  EXPECT_EQ(worker.push({image(200, 150, 1.0), nullptr, nullptr, {}}), KeyframeWorker::Pushed::kQueued);
+  while (worker.counters().queued > 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));  // in progress
+  auto oversize = image(320, 240, 2.0);
+  oversize->data.resize(oversize->data.size() * 2);
+  EXPECT_EQ(worker.push({oversize, nullptr, nullptr, {}}), KeyframeWorker::Pushed::kRejected);
+  EXPECT_EQ(oversize.use_count(), 1) << "not kept by the worker";
+  EXPECT_EQ(worker.push({image(500, 500, 3.0), nullptr, nullptr, {}}), KeyframeWorker::Pushed::kRejected)
+      << "larger than the whole queue";
+  for (int i = 0; i < 5; ++i) worker.push({image(200, 150, 4.0 + i), nullptr, nullptr, {}});  // 30 KB each
+  WorkerCounters c = worker.counters();
+  EXPECT_LE(c.queued_bytes, 200u * 1000u);
+  EXPECT_EQ(c.rejected, 2u);
+  for (int i = 0; i < 5; ++i) worker.push({image(300, 300, 10.0 + i), nullptr, nullptr, {}});  // 90 KB each
+  c = worker.counters();
+  EXPECT_LE(c.queued_bytes, 200u * 1000u);
+  EXPECT_EQ(c.queued, 2u) << "two of 90 KB fit in 200 KB";
+  EXPECT_EQ(c.dropped, 8u);
+  hold.unlock();
+  worker.waitIdle();
+  c = worker.counters();
+  EXPECT_EQ(c.processed + c.dropped + c.rejected, 13u) << "every keyframe accounted for";
+  EXPECT_EQ(c.processed, 3u);
+}
+
+// sparse_match by id bounds the stored keyframes as it bounds a request's descriptors: a map loaded
+// from a file may hold keyframes of any size (two of 20,000 and 100,000 features held the service
+// thread for 17 and 68 s).
+TEST(SparseMatchRequests, StoredKeyframesAreBoundedByMaxMatchFeaturesToo) {
+  const auto keyframe = [](size_t n) {
+    mild::Features f;
+    cv::RNG rng(static_cast<uint64_t>(n));
+    for (size_t i = 0; i < n; ++i) {
+      mild::Descriptor d;
+      for (int w = 0; w < d.numWords(); ++w) d.words[w] = (static_cast<uint64_t>(rng.next()) << 32) | rng.next();
+      f.descriptors.push_back(d);
+      f.keypoints.emplace_back(static_cast<float>(rng.uniform(0, 640)), static_cast<float>(rng.uniform(0, 480)), 7.0f);
+    }
+    return f;
+  };
+  const StoredFeatures stored = [&](uint64_t id) -> std::optional<mild::Features> { return keyframe(id); };
+  const mild::GeometricVerifier verifier(mild::VerificationParams{});
+  mild_lcd::SparseMatch::Request request;
+  request.query_id = 20000;  // the stand-in's id is its feature count
+  request.train_id = 300;
+  auto response = sparseMatch(request, stored, verifier, 10000);
+  EXPECT_FALSE(response.success);
+  EXPECT_NE(response.message.find("query keyframe 20000 has 20000 features, more than ~max_match_features (10000)"),
+            std::string::npos)
+      << response.message;
+  std::swap(request.query_id, request.train_id);
+  response = sparseMatch(request, stored, verifier, 10000);
+  EXPECT_FALSE(response.success);
+  EXPECT_NE(response.message.find("train keyframe 20000"), std::string::npos) << response.message;
+  request.query_id = 200;
+  request.train_id = 300;
+  response = sparseMatch(request, stored, verifier, 300);
+  EXPECT_TRUE(response.success) << response.message;
+}
+
+// A Keyframe message's descriptor_bytes reaches the detector even with no keypoints.
+TEST(Conversions, AnEmptyKeyframeCarriesItsDeclaredWidth) {
+  mild_lcd::Keyframe kf;
+  kf.descriptor_bytes = 64;
+  EXPECT_EQ(featuresFromMsg(kf).declared_bytes, 64);
+  kf.descriptor_bytes = 0;
+  EXPECT_EQ(featuresFromMsg(kf).declared_bytes, 32) << "0 means 32";
+  kf.descriptor_bytes = 64;
+  mild::LoopDetector orb;
+  EXPECT_THROW(orb.process(featuresFromMsg(kf), 1.0), mild::InvalidInput);
+  EXPECT_EQ(orb.size(), 0u);
 }
 
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {
@@ -388,6 +631,25 @@ TEST(Conversions, AKeyframesCameraInfoAndDepthsReachTheCore) {
   EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput);
 }
 
+// K all zero but K[8] = 1 (a common driver pattern) means "no calibration", as all zero does; finite
+// but absurd focal lengths are refused rather than silently failing every verification.
+TEST(Conversions, UncalibratedAndAbsurdIntrinsics) {
+  sensor_msgs::CameraInfo info;
+  info.K = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0};
+  EXPECT_FALSE(intrinsicsFromMsg(info).known()) << "unknown, not an error";
+  for (const double fx : {1e12, 1e-300, 0.5, 2e6}) {
+    info.K = {fx, 0.0, 159.5, 0.0, 256.0, 119.5, 0.0, 0.0, 1.0};
+    const std::string error = errorOf([&] { intrinsicsFromMsg(info); });
+    EXPECT_NE(error.find("[1, 1e6]"), std::string::npos) << fx << ": " << error;
+    info.K = {256.0, 0.0, 159.5, 0.0, fx, 119.5, 0.0, 0.0, 1.0};
+    EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput) << "fy " << fx;
+  }
+  info.K = {256.0, 0.0, 1e12, 0.0, 256.0, 119.5, 0.0, 0.0, 1.0};
+  EXPECT_THROW(intrinsicsFromMsg(info), mild::InvalidInput) << "cx 1e12";
+  info.K = {1.0, 0.0, -5.0, 0.0, 1e6, 1e6, 0.0, 0.0, 1.0};
+  EXPECT_TRUE(intrinsicsFromMsg(info).known()) << "the bounds themselves are accepted";
+}
+
 TEST(Conversions, MetricPosesAndCorrespondencesArePublishedWhenAskedFor) {
   mild::DetectionResult result;
   mild::LoopCandidate c;
@@ -419,7 +681,7 @@ TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
   shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
   KeyframeWorker::Hooks hooks;
   hooks.publish = [](const ProcessedKeyframe&) {};
-  KeyframeWorker worker(shared, 10, 1000 * 1000, hooks);
+  KeyframeWorker worker(shared, 10, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   const mild::CameraIntrinsics camera{300.0, 300.0, 100.0, 75.0};
   worker.push({image(200, 150, 1.0), nullptr, nullptr, camera});

@@ -6,6 +6,7 @@
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <ros/ros.h>
 
+#include "../common/run_command.hpp"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SparseMatch.h"
 #include "ros_test_support.hpp"
@@ -89,6 +90,38 @@ TEST(Tuning, StartsFromTheNodesValuesAndAppliesChangesBetweenKeyframes) {
   ASSERT_TRUE(ros::service::call("/sparse_match", srv));
   EXPECT_EQ(srv.response.inliers, inliers);
   EXPECT_FALSE(srv.response.verified) << "one inlier short of the retuned min_inliers";
+}
+
+// dynamic_reconfigure's own server skipped entries that name no parameter or give one a value of
+// another type, and applied the rest without a word. A request with such an entry is refused whole
+// (the node logs which entries); a proper one after it is applied. dynparam, which reads the
+// descriptions to type its values, works as with dynamic_reconfigure's server.
+TEST(Tuning, ARequestWithAnUnknownOrMistypedEntryIsRefusedWhole) {
+  const int before = valueOf(reconfigure({}).ints, "detector_max_candidates").value;
+  const int wanted = before == 2 ? 3 : 2;
+  dynamic_reconfigure::Config change;
+  dynamic_reconfigure::IntParameter candidates;
+  candidates.name = "detector_max_candidates";
+  candidates.value = wanted;
+  change.ints.push_back(candidates);
+  dynamic_reconfigure::DoubleParameter typo;
+  typo.name = "detector_max_candidatez";
+  typo.value = 1.0;
+  change.doubles.push_back(typo);
+  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, before) << "an unknown name";
+  change.doubles[0].name = "scoring_decision_probability";
+  change.ints.push_back(candidates);
+  change.ints.back().name = "verification_ratio";  // a double parameter given as an int
+  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, before) << "a wrong type";
+  change.ints.pop_back();
+  change.doubles.clear();
+  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, wanted) << "a proper request";
+
+  const auto dynparam = mild::test::runCommand(
+      "PATH=/usr/bin:$PATH rosrun dynamic_reconfigure dynparam set /mild_lcd/tuning detector_max_candidates " +
+      std::to_string(before));
+  EXPECT_EQ(dynparam.status, 0) << dynparam.output;
+  EXPECT_EQ(valueOf(reconfigure({}).ints, "detector_max_candidates").value, before) << dynparam.output;
 }
 
 }  // namespace

@@ -2,23 +2,27 @@
 
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <deque>
 #include <mutex>
 #include <optional>
 
 namespace mild {
 
-// A bounded multi-producer queue drained by one worker. When full, push() drops the oldest
-// waiting item (like a ROS subscriber queue) and counts it, so that callbacks never block and no
+// A bounded multi-producer queue drained by one worker, bounded in items and in bytes (each item's
+// size as its producer states it). When full, push() drops the oldest waiting items (like a ROS
+// subscriber queue) until the new one fits, and counts them, so that callbacks never block and no
 // drop goes unnoticed.
 template <class T>
 class BoundedQueue {
  public:
-  explicit BoundedQueue(size_t capacity) : capacity_(capacity == 0 ? 1 : capacity) {}
+  explicit BoundedQueue(size_t capacity, size_t capacity_bytes = SIZE_MAX)
+      : capacity_(capacity == 0 ? 1 : capacity), capacity_bytes_(capacity_bytes) {}
 
-  // Returns false when an older item had to be dropped to make room. After close() the item is
-  // discarded (and counted as dropped).
-  bool push(T item) {
+  // Returns false when older items had to be dropped to make room. An item of more than
+  // capacity_bytes on its own is the caller's to refuse: it would be kept alone. After close() the
+  // item is discarded (and counted as dropped).
+  bool push(T item, size_t bytes = 0) {
     bool kept_all = true;
     {
       std::lock_guard<std::mutex> lock(mutex_);
@@ -26,12 +30,15 @@ class BoundedQueue {
         ++dropped_;
         return false;
       }
-      if (items_.size() >= capacity_) {
+      while (!items_.empty() &&
+             (items_.size() >= capacity_ || bytes_ > capacity_bytes_ || bytes > capacity_bytes_ - bytes_)) {
+        bytes_ -= items_.front().bytes;
         items_.pop_front();
         ++dropped_;
         kept_all = false;
       }
-      items_.push_back(std::move(item));
+      items_.push_back({std::move(item), bytes});
+      bytes_ += bytes;
     }
     ready_.notify_one();
     return kept_all;
@@ -42,7 +49,8 @@ class BoundedQueue {
     std::unique_lock<std::mutex> lock(mutex_);
     ready_.wait(lock, [this] { return closed_ || !items_.empty(); });
     if (items_.empty()) return std::nullopt;
-    T item = std::move(items_.front());
+    T item = std::move(items_.front().item);
+    bytes_ -= items_.front().bytes;
     items_.pop_front();
     ++busy_;
     return item;
@@ -77,6 +85,7 @@ class BoundedQueue {
     std::lock_guard<std::mutex> lock(mutex_);
     const size_t n = items_.size();
     items_.clear();
+    bytes_ = 0;
     idle_.notify_all();
     return n;
   }
@@ -89,13 +98,26 @@ class BoundedQueue {
     std::lock_guard<std::mutex> lock(mutex_);
     return dropped_;
   }
+  // The bytes of the items waiting, as their producers stated them.
+  size_t bytes() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return bytes_;
+  }
   size_t capacity() const { return capacity_; }
+  size_t capacityBytes() const { return capacity_bytes_; }
 
  private:
+  struct Entry {
+    T item;
+    size_t bytes;
+  };
+
   const size_t capacity_;
+  const size_t capacity_bytes_;
   mutable std::mutex mutex_;
   std::condition_variable ready_, idle_;
-  std::deque<T> items_;
+  std::deque<Entry> items_;
+  size_t bytes_ = 0;
   size_t dropped_ = 0;
   size_t busy_ = 0;
   bool closed_ = false;

@@ -22,6 +22,9 @@ struct Features {
   DescriptorList descriptors;
   CameraIntrinsics camera;
   std::vector<float> depths;  // empty, or one per keypoint
+  // The descriptor width the sender declared (a Keyframe's descriptor_bytes), 0 when none: checked
+  // against the database's even when there are no descriptors to check.
+  int declared_bytes = 0;
 };
 
 // Throws InvalidInput, naming the problem, when the camera is malformed (CameraIntrinsics::wellFormed)

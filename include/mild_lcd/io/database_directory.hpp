@@ -1,6 +1,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 namespace mild {
 
@@ -21,7 +22,8 @@ class ConfinedFile {
   const std::string& display() const { return display_; }  // for messages: the path as resolved
 
   // Opens the file for reading. Refuses (InvalidInput) a symbolic link, FIFO, socket, device or
-  // folder, and never blocks on one; a missing file is an IoError. Returns the descriptor and the
+  // folder, and never blocks on one, and a file with other hard links (one planted in the folder
+  // could name any file on the disk); a missing file is an IoError. Returns the descriptor and the
   // file's size.
   int openForReading(unsigned long long& size) const;
   // Throws InvalidInput when something other than a regular file sits at the name (a symbolic
@@ -40,28 +42,42 @@ class ConfinedFile {
 // a link.
 ConfinedFile fileAtPath(const std::string& path);
 
+// What saves may leave in the folder: names at most max_depth folders deep; a save that would
+// create a file or folder is refused once the folder holds max_entries files and folders, or when
+// its files (other than the one replaced) already hold max_bytes.
+struct DirectoryLimits {
+  size_t max_depth = 8;
+  size_t max_entries = 100;
+  unsigned long long max_bytes = 64ull << 30;
+};
+
 // The one folder database files may be saved to and loaded from, for names that come from ROS
 // clients (the node often runs as root). A name resolves inside it or is refused:
 //   - relative names ("map.db", "site_a/map.db") are taken from the folder; absolute ones must lie
 //     inside it;
 //   - no "..", no empty or "." components, no symbolic link at any level below the folder;
-//   - at most 4096 bytes, 255 per component.
+//   - at most 4096 bytes, 255 per component, DirectoryLimits::max_depth folders deep;
+//   - saving within DirectoryLimits.
 // The folder itself is configured by the operator and may be a symbolic link.
 class DatabaseDirectory {
  public:
   // Creates the folder (and missing parents) when absent. Throws InvalidInput for a relative
   // path, IoError when it cannot be created or opened.
-  explicit DatabaseDirectory(const std::string& root);
+  explicit DatabaseDirectory(const std::string& root, const DirectoryLimits& limits = {});
   const std::string& root() const { return root_; }
 
-  // Throws InvalidInput naming the rule the request broke. create_folders makes missing
-  // sub-folders (for saving).
+  // Throws InvalidInput naming the rule the request broke. create_folders (for saving) checks the
+  // DirectoryLimits, then makes missing sub-folders.
   ConfinedFile resolve(const std::string& requested, bool create_folders = false) const;
   // The absolute path `requested` resolves to, or "" when it is refused (no file is touched).
   std::string describe(const std::string& requested) const;
 
  private:
+  // Throws InvalidInput when saving `parts` would leave more than the limits allow.
+  void checkRoomFor(const std::vector<std::string>& parts, const std::string& requested) const;
+
   std::string root_;
+  DirectoryLimits limits_;
 };
 
 }  // namespace mild

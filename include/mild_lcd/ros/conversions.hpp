@@ -30,13 +30,36 @@ struct DecodedImage {
   mild::PixelFormat format = mild::PixelFormat::kGray;
 };
 
-// mono8, bgr8, rgb8, bgra8 and rgba8 are used as they are (no copy); mono16 is scaled to mono8.
-// Anything else, an empty image, one of more than max_pixels, or a buffer too small for its declared
-// size is rejected.
 constexpr uint64_t kDefaultMaxImagePixels = 4096ull * 4096ull;
+constexpr size_t kDefaultMaxKeyframeFeatures = 10000;
+
+// How large one input message may be, judged on its sizes alone (nothing is decoded or allocated
+// for it) before it is queued: a client can neither fill the node's memory nor have it decode what
+// it then refuses.
+//   - Image: width x height <= max_image_pixels; data exactly step x height, and at most
+//     max_image_pixels x bytes per pixel of its encoding (padding cannot inflate it);
+//   - CompressedImage: JPEG or PNG only (the formats whose header gives the size), the header's
+//     width x height <= max_image_pixels, and at most kMaxCompressedBytesPerPixel x max_image_pixels
+//     bytes;
+//   - Keyframe: at most max_keyframe_features keypoints (descriptors and depths to match);
+//   - any: at most kMaxMessageOverheadBytes besides that payload (header, encoding, camera_info).
+struct InputLimits {
+  uint64_t max_image_pixels = kDefaultMaxImagePixels;
+  size_t max_keyframe_features = kDefaultMaxKeyframeFeatures;
+};
+constexpr size_t kMaxMessageOverheadBytes = 64 * 1024;
+constexpr uint64_t kMaxCompressedBytesPerPixel = 4;  // a raw bgra8 image's
+// Each throws InvalidInput naming the bound a message breaks; returns its size in bytes (what it
+// occupies while it waits in the queue).
+size_t checkedInputBytes(const sensor_msgs::Image& msg, const InputLimits& limits);
+size_t checkedInputBytes(const sensor_msgs::CompressedImage& msg, const InputLimits& limits);
+size_t checkedInputBytes(const mild_lcd::Keyframe& msg, const InputLimits& limits);
+
+// mono8, bgr8, rgb8, bgra8 and rgba8 are used as they are (no copy); mono16 is scaled to mono8.
+// Anything else, an empty image, or one over the bounds of checkedInputBytes is rejected.
 DecodedImage imageFromMsg(const sensor_msgs::Image& msg, uint64_t max_pixels = kDefaultMaxImagePixels);
-// JPEG or PNG bytes of the `compressed` transport; the size in the file's header is checked against
-// max_pixels before anything is decoded.
+// JPEG or PNG bytes of the `compressed` transport, within the bounds of checkedInputBytes (the size
+// in the file's header among them) before anything is decoded; other formats are refused.
 DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg, uint64_t max_pixels = kDefaultMaxImagePixels);
 // Width and height from a PNG's IHDR or a JPEG's frame header, without decoding; nullopt when the
 // bytes are neither (or the header cannot be found).
@@ -55,8 +78,11 @@ int descriptorBytesOf(uint32_t field);
 // the width is the database's is for the detector to judge.
 mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 
-// fx, fy, cx, cy from a CameraInfo's K; unknown when K is all zero. Throws InvalidInput for a K
-// that is neither (a zero or negative focal length beside other values, values not finite).
+// fx, fy, cx, cy from a CameraInfo's K; unknown when those four are zero (whatever K[8] and the
+// rest hold). Throws InvalidInput for a K that is neither: a focal length outside
+// [kMinFocalPixels, kMaxFocalPixels], a principal point beyond +-kMaxFocalPixels, values not finite.
+constexpr double kMinFocalPixels = 1.0;
+constexpr double kMaxFocalPixels = 1e6;
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg);
 
 // The answer published for one processed keyframe (candidate stamps come from the candidates).
@@ -68,8 +94,8 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
 
 // Serves a SparseMatch request. `stored` returns a copy of the features of a keyframe in the
 // database (none for an unknown id), so that the matching itself needs no lock on it. A side with
-// more than max_features descriptors is refused. Failures come back as success = false with a
-// message, never as exceptions.
+// more than max_features descriptors, given in the request or stored, is refused. Failures come back as success = false
+// with a message, never as exceptions.
 using StoredFeatures = std::function<std::optional<mild::Features>(uint64_t id)>;
 constexpr size_t kDefaultMaxMatchFeatures = 10000;
 mild_lcd::SparseMatch::Response sparseMatch(const mild_lcd::SparseMatch::Request& request, const StoredFeatures& stored,

@@ -4,6 +4,7 @@
 // ~save_on_shutdown and the save_database / load_database services. ROS-free.
 
 #include <atomic>
+#include <cstdint>
 #include <string>
 
 #include "mild_lcd/io/database_directory.hpp"
@@ -41,6 +42,9 @@ class DatabaseStore {
 
   // ~save_on_shutdown, unless a start-up load failed. Returns what happened (empty: nothing to do).
   std::string saveOnShutdown(SharedDetector& shared);
+  // ~autosave_period: as saveOnShutdown, but only when the maps changed (SharedDetector::changes)
+  // since this store's last save to ~database_path. Returns what happened (empty: nothing to do).
+  std::string autosave(SharedDetector& shared);
   bool savesAllowed() const { return saves_allowed_; }
 
  private:
@@ -56,6 +60,10 @@ class DatabaseStore {
   bool save_on_shutdown_;
   unsigned long long max_bytes_;
   std::atomic<bool> saves_allowed_{true};
+  std::string database_display_;  // ~database_path as resolved ("" when not set)
+  // SharedDetector::changes when ~database_path last held the map (start: nothing learnt yet, or
+  // what the file holds). Under the detector lock.
+  uint64_t saved_changes_ = 0;
 };
 
 }  // namespace mild_lcd

@@ -1,9 +1,10 @@
 #pragma once
 
-// The one thread that runs the detector: subscriber callbacks push keyframes into a bounded queue
-// (never blocking a nodelet manager thread), the worker decodes and processes them in arrival
-// order, and hands each result to `publish` outside the detector lock. Every keyframe that arrives
-// is answered, or counted: dropped (queue full), rejected (unusable), or discarded (reset, shutdown).
+// The one thread that runs the detector: subscriber callbacks push keyframes into a queue bounded
+// in keyframes and in bytes (never blocking a nodelet manager thread), the worker decodes and
+// processes them in arrival order, and hands each result to `publish` outside the detector lock.
+// Every keyframe that arrives is answered, or counted: dropped (queue full), rejected (unusable,
+// or over its size bounds, judged as it is pushed), or discarded (reset, shutdown).
 
 #include <atomic>
 #include <chrono>
@@ -47,6 +48,7 @@ struct ProcessedKeyframe {
 
 struct WorkerCounters {
   size_t processed = 0, rejected = 0, dropped = 0, discarded = 0, queued = 0, capacity = 0;
+  size_t queued_bytes = 0, capacity_bytes = 0;
   double last_ms = 0.0, mean_ms = 0.0, last_query_ms = 0.0, mean_query_ms = 0.0;
   size_t keyframes = 0, features = 0, memory_bytes = 0, discarded_buckets = 0;  // database snapshot
 };
@@ -59,12 +61,16 @@ class KeyframeWorker {
     std::function<bool()> wants_keypoints;                  // copy keypoints for the debug image?
     std::function<void(const std::string&)> warn;           // throttling is the caller's
   };
-  KeyframeWorker(SharedDetector& shared, size_t queue_size, uint64_t max_image_pixels, Hooks hooks);
+  // The queue holds at most queue_size keyframes and queue_bytes bytes of messages.
+  KeyframeWorker(SharedDetector& shared, size_t queue_size, size_t queue_bytes, const InputLimits& limits, Hooks hooks);
   ~KeyframeWorker();
 
   void start();
-  // From any thread. False when the queue was full and the oldest keyframe was dropped.
-  bool push(KeyframeInput input);
+  enum class Pushed { kQueued, kDroppedOldest, kRejected };
+  // From any thread; never waits for the detector. A message over its size bounds (InputLimits, or
+  // larger than the whole queue) is rejected, counted and warned about here, and released at once;
+  // kDroppedOldest: older keyframes were dropped to make room.
+  Pushed push(KeyframeInput input);
   // Removes every waiting keyframe and counts it as discarded; returns how many.
   size_t discardPending();
   // Discards what waits, lets the keyframe in progress finish, and joins the thread.
@@ -79,10 +85,11 @@ class KeyframeWorker {
  private:
   void run();
   void process(const KeyframeInput& input);
+  void reject(const std_msgs::Header& header, const std::string& why);
 
   SharedDetector& shared_;
   mild::BoundedQueue<KeyframeInput> queue_;
-  const uint64_t max_image_pixels_;
+  const InputLimits limits_;
   Hooks hooks_;
   std::thread thread_;
   std::atomic<size_t> discarded_{0};

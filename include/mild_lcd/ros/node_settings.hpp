@@ -18,16 +18,21 @@ struct NodeSettings {
   bool use_camera_info = true;
   bool publish_correspondences = false;
   int queue_size = 100;
-  int debug_image_cache = 1000;     // keyframes kept (half resolution, grey) for debug_image
-  int debug_image_cache_mb = 64;    // and at most this many megabytes of them
-  int max_image_pixels = 16777216;  // larger images are refused before decoding (4096 x 4096)
-  std::string database_dir;         // the only folder maps are saved to and loaded from
-  std::string database_path;        // inside database_dir (a name relative to it, or absolute)
+  int queue_mb = 256;                 // and at most this many megabytes of messages
+  int debug_image_cache = 1000;       // keyframes kept (half resolution, grey) for debug_image
+  int debug_image_cache_mb = 64;      // and at most this many megabytes of them
+  int max_image_pixels = 16777216;    // larger images are refused before decoding (4096 x 4096)
+  int max_keyframe_features = 10000;  // Keyframe messages with more keypoints are refused
+  std::string database_dir;           // the only folder maps are saved to and loaded from
+  std::string database_path;          // inside database_dir (a name relative to it, or absolute)
   bool load_on_start = false;
   bool save_on_shutdown = false;
-  int max_database_mb = 16384;     // larger files are refused unread
-  int max_match_features = 10000;  // per side of a sparse_match request
-  std::string robots;              // names of the robots served, space- or comma-separated; "" = one
+  int autosave_period = 60;         // seconds; with save_on_shutdown, a save this often when changed
+  int max_database_mb = 16384;      // larger files are refused unread
+  int max_database_files = 100;     // files and folders saves may leave in database_dir
+  int max_database_dir_mb = 65536;  // and the megabytes its files may hold before a save is refused
+  int max_match_features = 10000;   // per side of a sparse_match request
+  std::string robots;               // names of the robots served, space- or comma-separated; "" = one
 
   // The robots' names ("" = one robot, topics without a prefix), checked by load().
   std::vector<std::string> robotNames() const;
@@ -37,6 +42,12 @@ struct NodeSettings {
   // $ROS_HOME/mild_lcd). Throws mild::InvalidInput naming the parameter.
   static NodeSettings load(const mild::ParameterSource& source, const std::string& default_dir);
 };
+
+// BRISK and AKAZE describe every keypoint they detect, and AKAZE builds a nonlinear scale space of
+// the whole image: their time and memory grow with the pixels and with the keypoints found (noise
+// finds the most). A warning for the log when ~max_image_pixels lets such images in (over
+// 2048 x 2048 pixels); "" otherwise.
+std::string extractionCostWarning(const NodeSettings& settings, const std::string& feature_type);
 
 // One line per setting: name, default and meaning (for --print-config style listings and the
 // README's interface table).

@@ -7,6 +7,8 @@
 
 #include <string>
 
+#include <dynamic_reconfigure/Config.h>
+
 #include "mild_lcd/TuningConfig.h"
 #include "mild_lcd/detector/loop_detector.hpp"
 
@@ -15,6 +17,11 @@ namespace mild_lcd {
 // "detector/max_candidates" <-> "detector_max_candidates".
 std::string tuningName(const std::string& parameter);
 std::string parameterName(const std::string& tuning_name);
+
+// The entries of a dynamic_reconfigure request that name no tuning parameter, or give one a value
+// of another type than the cfg's (dynamic_reconfigure's own parsing skips both without a word), as
+// one line naming them; "" when there are none.
+std::string unreadTuningEntries(const dynamic_reconfigure::Config& request);
 
 // The detector's current values of its runtime parameters.
 mild_lcd::TuningConfig tuningConfigOf(const mild::DetectorParams& params);

@@ -297,13 +297,14 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
                        std::to_string(features.descriptors.size()) + " descriptors");
   }
   checkCameraAndDepths(features);
-  for (const Descriptor& d : features.descriptors) {
-    if (d.bytes != descriptorBytes()) {
-      throw InvalidInput("keyframe descriptors are " + std::to_string(d.bytes) + " bytes wide; this database holds " +
-                         std::to_string(descriptorBytes()) + "-byte descriptors (features/type " +
-                         params_.features.type + ")");
-    }
-  }
+  const auto refuseWidth = [&](int bytes) {
+    if (bytes == descriptorBytes()) return;
+    throw InvalidInput("keyframe descriptors are " + std::to_string(bytes) + " bytes wide; this database holds " +
+                       std::to_string(descriptorBytes()) + "-byte descriptors (features/type " + params_.features.type +
+                       ")");
+  };
+  if (features.declared_bytes != 0) refuseWidth(features.declared_bytes);  // judged even without descriptors
+  for (const Descriptor& d : features.descriptors) refuseWidth(d.bytes);
   checkId(id);
   if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
   DetectionResult result;

@@ -103,6 +103,13 @@ int ConfinedFile::openForReading(unsigned long long& size) const {
     ::close(fd);
     throw InvalidInput(display_ + " is " + kindOf(mode) + ": database files must be regular files");
   }
+  // A hard link is a second name of a file that may live anywhere on the file system: one planted
+  // in the folder (by anyone who may write there) would let a client read a file outside it.
+  if (st.st_nlink > 1) {
+    ::close(fd);
+    throw InvalidInput(display_ + " has " + std::to_string(st.st_nlink) +
+                       " hard links: database files must have one name, in the database folder");
+  }
   // Regular files never block; reading with O_NONBLOCK cleared keeps read() semantics plain.
   ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
   size = static_cast<unsigned long long>(st.st_size);
@@ -120,7 +127,7 @@ ConfinedFile fileAtPath(const std::string& path) {
   return ConfinedFile(fd, name, path);
 }
 
-DatabaseDirectory::DatabaseDirectory(const std::string& root) {
+DatabaseDirectory::DatabaseDirectory(const std::string& root, const DirectoryLimits& limits) : limits_(limits) {
   if (root.empty() || root.front() != '/') {
     throw InvalidInput("database folder must be an absolute path, got '" + root + "'");
   }
@@ -150,6 +157,11 @@ ConfinedFile DatabaseDirectory::resolve(const std::string& requested, bool creat
     relative = requested.substr(prefix.size());
   }
   const std::vector<std::string> parts = components(relative, requested);
+  if (parts.size() - 1 > limits_.max_depth) {
+    throw InvalidInput("database name '" + requested + "' is " + std::to_string(parts.size() - 1) +
+                       " folders deep; at most " + std::to_string(limits_.max_depth) + " are allowed");
+  }
+  if (create_folders) checkRoomFor(parts, requested);
 
   int fd = ::open(root_.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (fd < 0) throw IoError("database folder " + root_ + ": cannot open (" + errnoText(errno) + ")");
@@ -176,6 +188,39 @@ ConfinedFile DatabaseDirectory::resolve(const std::string& requested, bool creat
     fd = next;
   }
   return ConfinedFile(fd, parts.back(), shown + "/" + parts.back());
+}
+
+void DatabaseDirectory::checkRoomFor(const std::vector<std::string>& parts, const std::string& requested) const {
+  // What the save would add: the missing folders of its path and the file, unless it is replaced.
+  size_t added = 0;
+  fs::path path = root_;
+  for (const std::string& part : parts) {
+    path /= part;
+    std::error_code error;
+    if (added > 0 || !fs::exists(fs::symlink_status(path, error))) ++added;
+  }
+  // What the folder holds (symbolic links below it are counted, never followed), counted only as
+  // far as the bound.
+  size_t entries = 0;
+  unsigned long long bytes = 0;
+  std::error_code error;
+  for (fs::recursive_directory_iterator it(root_, fs::directory_options::skip_permission_denied, error), end;
+       !error && it != end; it.increment(error)) {
+    if (++entries + added > limits_.max_entries) {
+      throw InvalidInput("the database folder " + root_ + " holds " + std::to_string(limits_.max_entries) +
+                         " or more files and folders (~max_database_files): refusing to save " + requested +
+                         "; remove some, or save over an existing file");
+    }
+    std::error_code entry_error;
+    const fs::file_status status = it->symlink_status(entry_error);
+    if (entry_error || !fs::is_regular_file(status) || it->path() == path) continue;
+    const auto size = it->file_size(entry_error);
+    if (!entry_error) bytes += size;
+    if (bytes >= limits_.max_bytes) {
+      throw InvalidInput("the files in the database folder " + root_ + " hold " + std::to_string(bytes >> 20) +
+                         " MB or more (~max_database_dir_mb): refusing to save " + requested + "; remove some first");
+    }
+  }
 }
 
 std::string DatabaseDirectory::describe(const std::string& requested) const {
