@@ -1,5 +1,5 @@
 // The benchmarks as a user runs them, on tiny inputs: they finish, and their --json line carries
-// the figures the README reports. (Their speed is not tested here: benchmarks measure, tests check.)
+// the figures docs/speed.md reports. (Their speed is not tested here: benchmarks measure, tests check.)
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>

@@ -75,7 +75,7 @@ struct PoseGraphParams {
       "loops then bend the bench's pub_campus and 5,000-frame walk (docs/pose_graph.md).");
     v("loop_rotation_sigma_deg", p.loop_rotation_sigma_deg, Bounds::above(0),
       "Loop edges: standard deviation of the relative yaw, degrees (the relative pose's rotation is good to 2-4 "
-      "degrees median on the bench: README \"Relative pose\").");
+      "degrees median on the bench: docs/design.md, \"Relative pose\").");
     v("loop_translation_sigma", p.loop_translation_sigma, Bounds::above(0),
       "Metric loop edges (the query keyframe had depth): standard deviation of each translation component, metres.");
     v("loop_bearing_sigma_deg", p.loop_bearing_sigma_deg, Bounds::above(0),
