@@ -31,7 +31,7 @@ struct VerificationParams {
       "candidate, then a two-view model fitted with MAGSAC. Candidates that fail it are still reported (verified "
       "= false), with the low probability their few inliers give (scoring/); only verified ones are accepted. "
       "Its inlier count is the published probability's evidence that means the same on real frames as on "
-      "renders (README \"Accuracy\").");
+      "renders (docs/accuracy.md).");
     SparseMatchParams::declare(p.matching, v);
     v("ransac_threshold", p.ransac_threshold, Bounds::above(0).runtime(), "Model fit: inlier threshold in pixels.");
     v("confidence", p.confidence, Bounds::between(0, 1), "Model fit: RANSAC confidence.");
@@ -53,7 +53,7 @@ struct VerificationParams {
       "Verify one keyframe's candidates concurrently, on OpenCV's worker threads (cv::getNumThreads(): the cores, "
       "unless the process set fewer). The same results either way; on two cores three candidates take about 0.7 "
       "of the time, but in the soak at 30 Hz on two cores the node dropped keyframes with it and none without it, "
-      "so it is off by default (README \"Verification on two cores\").");
+      "so it is off by default (docs/speed.md, \"Verification on two cores\").");
   }
 
   bool usesIntrinsics() const { return fx > 0.0; }
