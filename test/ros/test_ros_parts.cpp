@@ -17,8 +17,10 @@
 #include <boost/make_shared.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/params/parameters.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
@@ -69,7 +71,7 @@ TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
   EXPECT_NE(errorOf([] { settingsFrom("database_dir: maps\n"); }).find("absolute"), std::string::npos);
 }
 
-// dynamic_reconfigure (cfg/Tuning.cfg) serves exactly the runtime parameters, with the detector's
+// dynamic_reconfigure (the generated cfg, tuning_cfg.hpp) serves exactly the runtime parameters, with the detector's
 // defaults and ranges the detector accepts; its values travel through the parameter registry.
 TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
   std::set<std::string> cfg, runtime;
@@ -80,7 +82,7 @@ TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
   const mild::DetectorParams defaults;
   EXPECT_EQ(mild::describeParameters(paramsFromTuning(mild_lcd::TuningConfig::__getDefault__(), defaults)),
             mild::describeParameters(defaults))
-      << "cfg/Tuning.cfg's defaults differ from the detector's";
+      << "the generated cfg's defaults differ from the detector's";
   for (const auto& bound : {mild_lcd::TuningConfig::__getMin__(), mild_lcd::TuningConfig::__getMax__()}) {
     mild::LoopDetector detector;
     EXPECT_NO_THROW(detector.retune(paramsFromTuning(bound, defaults))) << "a cfg bound the detector refuses";
@@ -158,15 +160,8 @@ TEST(NodeSettings, TheDatabaseFolderDefaultsToThePathsFolderOrRosHome) {
   EXPECT_FALSE(nodeSettingDocs().empty());
 }
 
-class Store : public ::testing::Test {
+class Store : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_store_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
   static std::unique_ptr<mild::LoopDetector> detector(size_t keyframes) {
     mild::DetectorParams p;
     p.verification.enabled = false;
@@ -188,7 +183,6 @@ class Store : public ::testing::Test {
   NodeSettings settings(const std::string& extra = "") const {
     return settingsFrom("database_dir: " + dir_.string() + "\n" + extra);
   }
-  fs::path dir_;
 };
 
 // Live tuning never waits for the detector (a merge or a save may hold it for seconds; the

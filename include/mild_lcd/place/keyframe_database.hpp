@@ -95,6 +95,9 @@ class KeyframeDatabase {
   // is not of the database's width (the cv::Mat overload: unless the matrix is N x width CV_8U). A
   // keyframe may have no features.
   KeyframeIndex insert(const DescriptorList& descriptors);
+  // What insert() checks first, so that a caller can refuse a keyframe before changing anything
+  // else: InvalidInput for another width, CapacityError when 2^32 features or keyframes are reached.
+  void checkRoomFor(const DescriptorList& descriptors) const;
   KeyframeIndex insert(const cv::Mat& descriptors);
   // Many keyframes at once, in order (loading a saved database): the same result as inserting them
   // one by one, with a single merge of the index at the end. Checks every width before adding any.

@@ -5,6 +5,7 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/common/median.hpp"
 #include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
 #include "mild_lcd/filter/independent_binary_filter.hpp"
 
@@ -33,19 +34,6 @@ double noLoopLikelihood(const FilterParams& params, size_t eligible_keyframes) {
   const double ratio = static_cast<double>(eligible_keyframes) / params.no_loop_reference_keyframes;
   return std::max(1.0, params.no_loop_likelihood * std::pow(ratio, params.no_loop_growth));
 }
-
-namespace {
-
-// Median with the two middle values averaged for an even count; reorders its argument.
-double median(std::vector<double>& v) {
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<long>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + static_cast<long>(mid)));
-}
-
-}  // namespace
 
 std::vector<double> robustSaliency(const std::vector<double>& similarity) {
   std::vector<double> z(similarity.size(), 0.0);
