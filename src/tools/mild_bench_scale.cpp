@@ -179,8 +179,8 @@ int run(const Options& opt) {
 
   mild::FeatureParams feature_params;
   feature_params.type = opt.feature_type;
-  feature_params.orb.num_features = feature_params.brisk.num_features = feature_params.akaze.num_features =
-      opt.features;
+  // Every extractor's budget, whichever the type names.
+  mild::forEachSection(feature_params.extractors, [&](auto& section) { section.num_features = opt.features; });
   const std::unique_ptr<mild::FeatureExtractor> extractor_owner = mild::makeFeatureExtractor(feature_params);
   const mild::FeatureExtractor& extractor = *extractor_owner;
   // Keyframes: a real walk's frames (--sequence), or real frames replicated to any size.

@@ -11,7 +11,7 @@
 
 #include "mild_lcd/detector/candidate_scorer.hpp"
 #include "mild_lcd/features/feature_source.hpp"
-#include "mild_lcd/filter/temporal_filter.hpp"
+#include "mild_lcd/filter/filters.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
 #include "mild_lcd/verification/candidate_verifier.hpp"

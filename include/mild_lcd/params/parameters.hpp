@@ -16,7 +16,8 @@ namespace mild {
 template <class P, class Visit>
 void visitParameters(P& p, Visit&& visit);
 
-// The sections in their order, each with what it is about (config/default.yaml's section comments).
+// The sections in their order, each with what it is about (config/default.yaml's section comments):
+// each section struct's kDoc, the extension points' from their tables.
 struct ParameterSection {
   std::string name;
   std::string doc;
@@ -32,7 +33,13 @@ std::string parameterMarkdown();
 
 // Reads every parameter the source has (absent ones keep their defaults), rejects unknown names in
 // the detector's namespaces, and validates the result. Throws InvalidInput naming the parameter.
+// The filters' parameters are also read by their names of earlier versions, filter/<name>, which
+// set <name> in every filter's section that has it (legacyParameterName).
 DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorParams& defaults = {});
+
+// The earlier name of a parameter that is still read ("filter/loop_onset" for
+// "exclusive_hypotheses/loop_onset"), or "" when it has none.
+std::string legacyParameterName(const std::string& name);
 
 // The namespaces that belong to the detector (a source may hold other names outside them).
 const std::vector<std::string>& detectorParameterNamespaces();
@@ -59,15 +66,14 @@ inline std::string searchModeName(SearchMode m) { return m == SearchMode::kExact
 template <class P, class Visit>
 void visitParameters(P& p, Visit&& visit) {
   visitSection(p.features, visit);
-  visitSection(p.features.orb, visit);
-  visitSection(p.features.brisk, visit);
-  visitSection(p.features.akaze, visit);
+  forEachSection(p.features.extractors, [&](auto& section) { visitSection(section, visit); });
   visitSection(p.database.index, visit);
   visitSection(p.database.similarity, visit);
   visit(std::string("similarity/search"), p.search, Bounds::oneOf({"index", "exact"}),
         "\"index\" (multi-index hashing, the method) or \"exact\" (brute force over every stored feature: the "
         "accuracy ceiling, for evaluation only; orders of magnitude slower).");
   visitSection(p.filter, visit);
+  forEachSection(p.filter.filters, [&](auto& section) { visitSection(section, visit); });
   visitSection(p.candidates, visit);
   visitSection(p.verification, visit);
   visitSection(p.scoring, visit);

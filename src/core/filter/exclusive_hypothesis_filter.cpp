@@ -10,8 +10,20 @@
 
 namespace mild {
 
-ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const FilterParams& params)
-    : params_((params.validate(), params)) {
+void ExclusiveHypothesisParams::validate() const {
+  validateDeclared(*this);
+  double total = 0.0;
+  for (double w : motion_kernel) total += w;
+  if (!(total > 0.0)) throw InvalidInput(std::string(kSection) + "/motion_kernel needs at least one positive weight");
+}
+
+double noLoopLikelihood(const ExclusiveHypothesisParams& params, size_t eligible_keyframes) {
+  if (params.no_loop_growth == 0.0) return params.no_loop_likelihood;
+  const double ratio = static_cast<double>(eligible_keyframes) / params.no_loop_reference_keyframes;
+  return std::max(1.0, params.no_loop_likelihood * std::pow(ratio, params.no_loop_growth));
+}
+
+ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const Params& params) : params_((params.validate(), params)) {
   const double total = std::accumulate(params_.motion_kernel.begin(), params_.motion_kernel.end(), 0.0);
   for (double w : params_.motion_kernel) kernel_.push_back(w / total);
 }

@@ -9,7 +9,7 @@
 
 namespace mild {
 
-IndependentBinaryFilter::IndependentBinaryFilter(const FilterParams& params) : params_((params.validate(), params)) {}
+IndependentBinaryFilter::IndependentBinaryFilter(const Params& params) : params_((params.validate(), params)) {}
 
 const std::vector<double>& IndependentBinaryFilter::update(const std::vector<double>& similarity) {
   const size_t n = similarity.size();

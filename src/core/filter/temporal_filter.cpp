@@ -6,33 +6,28 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/median.hpp"
-#include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
-#include "mild_lcd/filter/independent_binary_filter.hpp"
+#include "mild_lcd/filter/filters.hpp"
 
 namespace mild {
 
 const std::vector<std::string>& temporalFilterTypes() {
-  static const std::vector<std::string> types = {ExclusiveHypothesisFilter::kName, IndependentBinaryFilter::kName};
+  static const std::vector<std::string> types = TemporalFilters::names();
   return types;
 }
 
 void FilterParams::validate() const {
   validateDeclared(*this);
-  double total = 0.0;
-  for (double w : motion_kernel) total += w;
-  if (!(total > 0.0)) throw InvalidInput("filter/motion_kernel needs at least one positive weight");
+  forEachSection(filters, [](const auto& section) { section.validate(); });
 }
 
 std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params) {
   params.validate();
-  if (params.type == IndependentBinaryFilter::kName) return std::make_unique<IndependentBinaryFilter>(params);
-  return std::make_unique<ExclusiveHypothesisFilter>(params);
-}
-
-double noLoopLikelihood(const FilterParams& params, size_t eligible_keyframes) {
-  if (params.no_loop_growth == 0.0) return params.no_loop_likelihood;
-  const double ratio = static_cast<double>(eligible_keyframes) / params.no_loop_reference_keyframes;
-  return std::max(1.0, params.no_loop_likelihood * std::pow(ratio, params.no_loop_growth));
+  std::unique_ptr<TemporalFilter> filter;
+  TemporalFilters::withName(params.type, [&](auto entry) {
+    using F = typename decltype(entry)::type;
+    filter = std::make_unique<F>(params.section<typename F::Params>());
+  });
+  return filter;
 }
 
 std::vector<double> robustSaliency(const std::vector<double>& similarity) {

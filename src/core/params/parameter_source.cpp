@@ -1,5 +1,8 @@
 #include "mild_lcd/params/parameter_source.hpp"
 
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -33,14 +36,16 @@ void flatten(const YAML::Node& node, const std::string& prefix, std::vector<std:
   // a null node (an empty section such as "filter:") sets nothing
 }
 
+// A number in full, as std::stod reads it, except that values below the smallest normal double
+// (the generated cfg's bound just above 0 is 4.9e-324) are numbers too: stod refuses their ERANGE.
 std::optional<double> parseDouble(const std::string& text) {
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used == text.size()) return v;
-  } catch (const std::exception&) {
-  }
-  return std::nullopt;
+  const char* begin = text.c_str();
+  char* end = nullptr;
+  errno = 0;
+  const double v = std::strtod(begin, &end);
+  if (end == begin || end != begin + text.size()) return std::nullopt;
+  if (errno == ERANGE && std::isinf(v)) return std::nullopt;  // overflow
+  return v;
 }
 
 }  // namespace

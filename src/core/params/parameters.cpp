@@ -43,19 +43,33 @@ bool inNamespaces(const std::string& name) {
 }  // namespace
 
 const std::vector<ParameterSection>& parameterSections() {
-  static const std::vector<ParameterSection> sections = {
-      {"features", "Where a keyframe's features come from when the node is given images."},
-      {"orb", "ORB (OpenCV), features/type orb: 256-bit descriptors."},
-      {"brisk", "BRISK (OpenCV), features/type brisk: 512-bit descriptors, as OKVIS and maplab use."},
-      {"akaze", "AKAZE with its M-LDB descriptor (OpenCV), features/type akaze: 486 bits in 61 bytes."},
-      {"index", "Multi-index hashing of the stored descriptors (seed paper III.B)."},
-      {"similarity", "Image similarity by voting (seed paper III.A, III.C-E). Distances are given per 256 bits."},
-      {"filter", "The temporal filter that turns similarity into a loop probability."},
-      {"detector", "Which stored keyframes may be candidates, and how many are reported."},
-      {"verification", "Geometric verification: sparse match of query and candidate, then a two-view model."},
-      {"scoring", "The calibrated loop probability every candidate is published with."},
-  };
+  static const std::vector<ParameterSection> sections = [] {
+    std::vector<ParameterSection> out;
+    // The extension points' sections carry their own doc (kDoc); the stages' are here.
+    const auto add = [&](const auto& section) { out.push_back({section.kSection, section.kDoc}); };
+    const auto stage = [&](const auto& section, const char* doc) { out.push_back({section.kSection, doc}); };
+    const DetectorParams p;
+    add(p.features);
+    forEachSection(p.features.extractors, add);
+    stage(p.database.index, "Multi-index hashing of the stored descriptors (seed paper III.B).");
+    stage(p.database.similarity,
+          "Image similarity by voting (seed paper III.A, III.C-E). Distances are given per 256 bits.");
+    add(p.filter);
+    forEachSection(p.filter.filters, add);
+    stage(p.candidates, "Which stored keyframes may be candidates, and how many are reported.");
+    stage(p.verification, "Geometric verification: sparse match of query and candidate, then a two-view model.");
+    stage(p.scoring, "The calibrated loop probability every candidate is published with.");
+    return out;
+  }();
   return sections;
+}
+
+std::string legacyParameterName(const std::string& name) {
+  const size_t slash = name.find('/');
+  if (slash == std::string::npos) return "";
+  const auto& filters = temporalFilterTypes();
+  if (std::find(filters.begin(), filters.end(), name.substr(0, slash)) == filters.end()) return "";
+  return std::string(FilterParams::kSection) + name.substr(slash);
 }
 
 const std::vector<std::string>& detectorParameterNamespaces() {
@@ -70,9 +84,9 @@ const std::vector<std::string>& detectorParameterNamespaces() {
 DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorParams& defaults) {
   DetectorParams p = defaults;
   std::vector<std::string> known;
-  visitParameters(p, [&](const std::string& name, auto& field, const Bounds&, const char*) {
+  // Earlier names first, so that a file holding both lets the current name decide.
+  const auto read = [&](const std::string& name, auto& field) {
     using T = std::decay_t<decltype(field)>;
-    known.push_back(name);
     if constexpr (std::is_same_v<T, bool>) {
       if (auto v = source.getBool(name)) field = *v;
     } else if constexpr (std::is_same_v<T, double>) {
@@ -101,6 +115,15 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
         field = static_cast<T>(*v);
       }
     }
+  };
+  visitParameters(p, [&](const std::string& name, auto& field, const Bounds&, const char*) {
+    const std::string legacy = legacyParameterName(name);
+    if (!legacy.empty()) {
+      known.push_back(legacy);
+      read(legacy, field);
+    }
+    known.push_back(name);
+    read(name, field);
   });
   const auto& namespaces = detectorParameterNamespaces();
   for (const std::string& name : source.names()) {
@@ -191,6 +214,8 @@ std::string parameterYaml(const DetectorParams& params) {
          "#   the nodelet's private namespace       (<rosparam file=\"...\" command=\"load\"/>, e.g. "
          "~orb/num_features)\n"
          "#   your own YAML, listing only what you change.\n"
+         "# The filters' sections are named after them; their names of earlier versions, filter/<name>,\n"
+         "# still set <name> in every filter section that has it.\n"
          "# Unknown names in these sections, wrong types and values out of range stop the node at start-up\n"
          "# with a message naming the parameter. [runtime] marks what dynamic_reconfigure may change while\n"
          "# the node runs; everything else is read at start-up only. Figures quoted were measured on\n"
