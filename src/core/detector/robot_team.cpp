@@ -45,15 +45,16 @@ std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
   return others;
 }
 
-DetectionResult RobotTeam::process(size_t robot, Features features, double stamp, std::optional<uint64_t> id) {
+DetectionResult RobotTeam::process(Observation observation) {
+  const size_t robot = observation.robot;
   const std::vector<OtherMap> others = otherMaps(robot);
-  return robots_[robot]->process(std::move(features), stamp, id, others, static_cast<uint32_t>(robot));
-}
-
-DetectionResult RobotTeam::process(size_t robot, const cv::Mat& image, PixelFormat format, double stamp,
-                                   std::optional<uint64_t> id, const CameraIntrinsics& camera) {
-  const std::vector<OtherMap> others = otherMaps(robot);
-  return robots_[robot]->process(image, format, stamp, id, camera, others, static_cast<uint32_t>(robot));
+  LoopDetector& detector = *robots_[robot];
+  if (observation.image) {
+    return detector.process(observation.image->pixels, observation.image->format, observation.stamp, observation.id,
+                            observation.features.camera, others, static_cast<uint32_t>(robot));
+  }
+  return detector.process(std::move(observation.features), observation.stamp, observation.id, others,
+                          static_cast<uint32_t>(robot));
 }
 
 void RobotTeam::mapChanged(size_t robot) {
