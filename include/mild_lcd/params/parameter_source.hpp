@@ -4,10 +4,15 @@
 // the node's settings (ros/node_settings.hpp) are read through it. Includes nothing of the pipeline.
 
 #include <cstdint>
+#include <limits>
 #include <optional>
+#include <sstream>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
+
+#include "mild_lcd/common/errors.hpp"
 
 namespace mild {
 
@@ -53,5 +58,54 @@ class YamlParameterSource : public ParameterSource {
   std::string origin_;
   std::vector<std::pair<std::string, Value>> values_;
 };
+
+// Reads `name` from `source` into `field` when the source has it (absent: the field keeps its
+// value), by the field's type: bool, double, std::vector<double>, std::string or an integer, whose
+// range is checked. Throws InvalidInput for a wrong type or an integer the field cannot hold,
+// naming `shown` (default: the name). The one typed read of the detector's parameters and the
+// node's settings.
+template <class T>
+void readParameter(const ParameterSource& source, const std::string& name, T& field, const std::string& shown = "") {
+  if constexpr (std::is_same_v<T, bool>) {
+    if (auto v = source.getBool(name)) field = *v;
+  } else if constexpr (std::is_same_v<T, double>) {
+    if (auto v = source.getDouble(name)) field = *v;
+  } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+    if (auto v = source.getDoubleList(name)) field = *v;
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    if (auto v = source.getString(name)) field = *v;
+  } else {
+    static_assert(std::is_integral_v<T>, "a parameter is bool, double, a list of doubles, a string or an integer");
+    if (auto v = source.getInt(name)) {
+      if (*v < static_cast<int64_t>(std::numeric_limits<T>::min()) ||
+          static_cast<uint64_t>(*v) > static_cast<uint64_t>(std::numeric_limits<T>::max()) ||
+          (std::is_unsigned_v<T> && *v < 0)) {
+        throw InvalidInput("parameter " + (shown.empty() ? name : shown) + " is out of range: " + std::to_string(*v));
+      }
+      field = static_cast<T>(*v);
+    }
+  }
+}
+
+// A parameter's value as text (logs, --print-config, the generated tables): true/false, strings as
+// they are, lists as [a, b], numbers as a stream writes them.
+template <class T>
+std::string parameterText(const T& v) {
+  if constexpr (std::is_same_v<T, std::vector<double>>) {
+    std::ostringstream out;
+    out << "[";
+    for (size_t i = 0; i < v.size(); ++i) out << (i ? ", " : "") << v[i];
+    out << "]";
+    return out.str();
+  } else if constexpr (std::is_same_v<T, bool>) {
+    return v ? "true" : "false";
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    return v;
+  } else {
+    std::ostringstream out;
+    out << v;
+    return out.str();
+  }
+}
 
 }  // namespace mild

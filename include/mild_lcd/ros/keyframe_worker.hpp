@@ -15,7 +15,7 @@
 #include <string>
 #include <thread>
 
-#include "mild_lcd/common/bounded_queue.hpp"
+#include "mild_lcd/ros/bounded_queue.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/keyframe_input.hpp"
 #include "mild_lcd/ros/shared_detector.hpp"

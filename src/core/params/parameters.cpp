@@ -14,22 +14,10 @@ namespace {
 
 template <class T>
 std::string toText(const T& v) {
-  if constexpr (std::is_same_v<T, std::vector<double>>) {
-    std::ostringstream out;
-    out << "[";
-    for (size_t i = 0; i < v.size(); ++i) out << (i ? ", " : "") << v[i];
-    out << "]";
-    return out.str();
-  } else if constexpr (std::is_same_v<T, bool>) {
-    return v ? "true" : "false";
-  } else if constexpr (std::is_same_v<T, SearchMode>) {
+  if constexpr (std::is_same_v<T, SearchMode>) {
     return searchModeName(v);
-  } else if constexpr (std::is_same_v<T, std::string>) {
-    return v;
   } else {
-    std::ostringstream out;
-    out << v;
-    return out.str();
+    return parameterText(v);
   }
 }
 
@@ -87,15 +75,7 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
   // Earlier names first, so that a file holding both lets the current name decide.
   const auto read = [&](const std::string& name, auto& field) {
     using T = std::decay_t<decltype(field)>;
-    if constexpr (std::is_same_v<T, bool>) {
-      if (auto v = source.getBool(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, double>) {
-      if (auto v = source.getDouble(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, std::vector<double>>) {
-      if (auto v = source.getDoubleList(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, std::string>) {
-      if (auto v = source.getString(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, SearchMode>) {
+    if constexpr (std::is_same_v<T, SearchMode>) {
       if (auto v = source.getString(name)) {
         if (*v == "index")
           field = SearchMode::kIndex;
@@ -105,15 +85,7 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
           throw InvalidInput("parameter " + name + " must be 'index' or 'exact', got '" + *v + "'");
       }
     } else {
-      static_assert(std::is_integral_v<T>);
-      if (auto v = source.getInt(name)) {
-        if (*v < static_cast<int64_t>(std::numeric_limits<T>::min()) ||
-            static_cast<uint64_t>(*v) > static_cast<uint64_t>(std::numeric_limits<T>::max()) ||
-            (std::is_unsigned_v<T> && *v < 0)) {
-          throw InvalidInput("parameter " + name + " is out of range: " + std::to_string(*v));
-        }
-        field = static_cast<T>(*v);
-      }
+      readParameter(source, name, field);
     }
   };
   visitParameters(p, [&](const std::string& name, auto& field, const Bounds&, const char*) {

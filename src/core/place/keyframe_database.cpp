@@ -5,7 +5,6 @@
 #include <limits>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/common/median.hpp"
 #include "mild_lcd/common/stamped_set.hpp"
 
 namespace mild {
@@ -206,37 +205,6 @@ DescriptorList KeyframeDatabase::descriptors(KeyframeIndex k) const {
 QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_limit, SearchMode mode) const {
   return query(descriptorsFromMat(q, params_.descriptor_bytes), candidate_limit, mode, nullptr);
 }
-
-namespace {
-
-// The near-past band (NearPastRule) from matched[k]: query features with a match in keyframe k,
-// for k < limit.
-KeyframeIndex nearPastBand(const std::vector<uint32_t>& matched, KeyframeIndex limit, const NearPastRule& rule) {
-  const KeyframeIndex floor = std::min(rule.floor, limit);
-  const KeyframeIndex session = limit - floor;
-  if (session == 0) return 0;
-  // The background may include earlier sessions: they show elsewhere as well as anything does.
-  if (limit < static_cast<KeyframeIndex>(rule.min_background)) return session;
-  const KeyframeIndex window = std::min<KeyframeIndex>(limit, static_cast<KeyframeIndex>(std::max(1, rule.background)));
-  std::vector<double> level(window);
-  for (KeyframeIndex i = 0; i < window; ++i) level[i] = matched[limit - 1 - i];
-  const double centre = upperMedian(level);
-  for (double& v : level) v = std::abs(v - centre);
-  const double threshold = centre + rule.kappa * 1.4826 * upperMedian(level);
-  KeyframeIndex band = 0;
-  int below = 0;
-  for (KeyframeIndex k = limit; k-- > floor;) {
-    if (matched[k] > threshold) {
-      band = limit - k;
-      below = 0;
-    } else if (++below > rule.tolerance) {
-      break;
-    }
-  }
-  return band;
-}
-
-}  // namespace
 
 template <int kTailWords>
 void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch,
