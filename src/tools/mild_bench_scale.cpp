@@ -227,9 +227,9 @@ struct IndexRun {
   std::vector<uint64_t> pairs;  // per query: pairs (query feature, stored feature) within d0, what votes
 };
 
-IndexRun measureIndex(const Workload& w, size_t n, const mild::DatabaseParams& params) {
+// Inserts the first n keyframes into `db` and asks it every query.
+IndexRun insertAndQuery(mild::KeyframeDatabase& db, const Workload& w, size_t n) {
   IndexRun run;
-  mild::KeyframeDatabase db(params);
   run.insert = insertAll(db, w.keyframe_at, n);
   run.bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
   for (const auto& q : w.queries) {
@@ -240,6 +240,11 @@ IndexRun measureIndex(const Workload& w, size_t n, const mild::DatabaseParams& p
     run.pairs.push_back(r.stats.votes);
   }
   return run;
+}
+
+IndexRun measureIndex(const Workload& w, size_t n, const mild::DatabaseParams& params) {
+  mild::KeyframeDatabase db(params);
+  return insertAndQuery(db, w, n);
 }
 
 // The same index with each entry's first 64 bits beside its id.
@@ -269,15 +274,12 @@ MihRun measureMih(const Options& opt, const Workload& w, size_t n, const mild::D
                   const mild::DatabaseParams& full_params) {
   MihRun run;
   mild::KeyframeDatabase db(et_params);
-  run.insert = insertAll(db, w.keyframe_at, n);
-  run.bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
-  for (const auto& q : w.queries) {
-    auto t = Clock::now();
-    const auto r = db.query(q);
-    run.mih_et.samples.push_back(msSince(t));
-    run.work += r.stats;
-    run.pairs.push_back(r.stats.votes);
-  }
+  IndexRun with_et = insertAndQuery(db, w, n);
+  run.mih_et = std::move(with_et.timing);
+  run.work = with_et.work;
+  run.insert = with_et.insert;
+  run.bytes_per_feature = with_et.bytes_per_feature;
+  run.pairs = std::move(with_et.pairs);
   db.setSimilarityParams(full_params.similarity);
   for (const auto& q : w.queries) {
     auto t = Clock::now();
