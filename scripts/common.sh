@@ -29,3 +29,37 @@ mild_source_devel() {
   # shellcheck disable=SC1091
   source "$BUILD_DIR/devel/setup.bash"
 }
+
+# A private master on a free port, so that a roscore the user already runs is left alone; its log
+# goes to $1/roscore.log. Every process a script starts goes into STARTED (newest first where the
+# order of stopping matters): on exit, each gets SIGINT (a clean stop), then whatever still runs
+# after 15 s gets SIGTERM, then SIGKILL, so a hung node never outlives its script.
+mild_start_private_roscore() {
+  local out=$1
+  PORT=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])')
+  export ROS_MASTER_URI="http://localhost:$PORT"
+  STARTED=()
+  trap mild_stop_started EXIT
+  roscore -p "$PORT" >"$out/roscore.log" 2>&1 &
+  STARTED+=($!)
+  for _ in $(seq 100); do
+    rosparam get /rosdistro >/dev/null 2>&1 && return 0
+    sleep 0.2
+  done
+  echo "[mild_lcd] roscore did not start (see $out/roscore.log)" >&2
+  return 1
+}
+
+mild_stop_started() {
+  for pid in "${STARTED[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  for _ in $(seq 150); do
+    local alive=0
+    for pid in "${STARTED[@]}"; do kill -0 "$pid" 2>/dev/null && alive=1; done
+    [[ $alive -eq 0 ]] && break
+    sleep 0.1
+  done
+  for pid in "${STARTED[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  sleep 1
+  for pid in "${STARTED[@]}"; do kill -KILL "$pid" 2>/dev/null || true; done
+  for pid in "${STARTED[@]}"; do wait "$pid" 2>/dev/null || true; done
+}

@@ -19,33 +19,7 @@ OUT="$BUILD_DIR/demo"
 FRAMES=$(ls "$SAMPLE/images" | wc -l)
 mkdir -p "$OUT"
 
-# A private master on a free port, so that a roscore the user already runs is left alone.
-PORT=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])')
-export ROS_MASTER_URI="http://localhost:$PORT"
-STARTED=()
-stop_started() {
-  for pid in "${STARTED[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  # SIGINT first (a clean stop); whatever still runs after 15 s gets SIGTERM, then SIGKILL.
-  for _ in $(seq 150); do
-    alive=0
-    for pid in "${STARTED[@]}"; do kill -0 "$pid" 2>/dev/null && alive=1; done
-    [[ $alive -eq 0 ]] && break
-    sleep 0.1
-  done
-  for pid in "${STARTED[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  sleep 1
-  for pid in "${STARTED[@]}"; do kill -KILL "$pid" 2>/dev/null || true; done
-  for pid in "${STARTED[@]}"; do wait "$pid" 2>/dev/null || true; done
-}
-trap stop_started EXIT
-
-roscore -p "$PORT" >"$OUT/roscore.log" 2>&1 &
-STARTED+=($!)
-for _ in $(seq 100); do
-  rosparam get /rosdistro >/dev/null 2>&1 && break
-  sleep 0.2
-done
-rosparam get /rosdistro >/dev/null 2>&1 || { echo "[mild_lcd] roscore did not start (see $OUT/roscore.log)" >&2; exit 1; }
+mild_start_private_roscore "$OUT" || exit 1
 
 rm -f "$OUT/replay_result.json"
 : >"$OUT/roslaunch.log"  # exists before tail follows it

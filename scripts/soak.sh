@@ -14,18 +14,7 @@ mild_source_devel
 OUT="${SOAK_OUT:-$BUILD_DIR/soak}"
 BAG="$BUILD_DIR/bags/sample_corridor.bag"
 mkdir -p "$OUT"
-PORT=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])')
-export ROS_MASTER_URI="http://localhost:$PORT"
-STARTED=()
-stop_started() {
-  for pid in "${STARTED[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  for pid in "${STARTED[@]}"; do wait "$pid" 2>/dev/null || true; done
-}
-trap stop_started EXIT
-
-roscore -p "$PORT" >"$OUT/roscore.log" 2>&1 &
-STARTED+=($!)
-until rosparam get /rosdistro >/dev/null 2>&1; do sleep 0.2; done
+mild_start_private_roscore "$OUT" || exit 1
 
 [[ -z "${CONFIG:-}" ]] || rosparam load "$CONFIG" /mild_lcd
 "$BUILD_DIR/devel/lib/mild_lcd/mild_lcd_node" __name:=mild_lcd image:=/camera/image _use_keyframe_input:=false \

@@ -199,16 +199,8 @@ DecodedImage imageFromMsg(const sensor_msgs::CompressedImage& msg, uint64_t max_
   refuseLargerThan(static_cast<uint64_t>(decoded.cols), static_cast<uint64_t>(decoded.rows), max_pixels,
                    "decoded image");
   if (decoded.depth() == CV_16U) decoded.convertTo(decoded, CV_8U, 1.0 / 256.0);
-  switch (decoded.channels()) {
-    case 1:
-      return DecodedImage{decoded, mild::PixelFormat::kGray};
-    case 3:
-      return DecodedImage{decoded, mild::PixelFormat::kBgr};  // imdecode yields BGR
-    case 4:
-      return DecodedImage{decoded, mild::PixelFormat::kBgra};
-    default:
-      throw mild::InvalidInput("compressed image has " + std::to_string(decoded.channels()) + " channels");
-  }
+  if (const auto format = mild::decodedPixelFormat(decoded.channels())) return DecodedImage{decoded, *format};
+  throw mild::InvalidInput("compressed image has " + std::to_string(decoded.channels()) + " channels");
 }
 
 std::vector<cv::KeyPoint> keypointsFromMsg(const std::vector<mild_lcd::KeyPoint>& msg) {

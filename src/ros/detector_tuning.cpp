@@ -54,14 +54,16 @@ void DetectorTuning::apply(mild_lcd::TuningConfig& config) {
   try {
     mild::DetectorParams next = paramsFromTuning(config, latest_);
     next.validate();
-    if (mild::describeParameters(next) == mild::describeParameters(latest_)) return;
+    const auto before = mild::describeParameters(latest_), after = mild::describeParameters(next);
+    std::string changes;  // whatever changed, named from the registry
+    for (size_t i = 0; i < after.size(); ++i) {
+      if (before[i].second != after[i].second)
+        changes += (changes.empty() ? "" : ", ") + after[i].first + " " + after[i].second;
+    }
+    if (changes.empty()) return;
     shared_.requestRetune(next);
     latest_ = next;
-    ROS_INFO_STREAM_NAMED(log_name_, "retuned: max_candidates " << next.candidates.max_candidates << ", exclusion "
-                                                                << next.candidates.exclusion_frames
-                                                                << " keyframes, decision probability "
-                                                                << next.scoring.decision_probability << ", min_inliers "
-                                                                << next.verification.min_inliers);
+    ROS_INFO_STREAM_NAMED(log_name_, "retuned: " << changes);
   } catch (const mild::InvalidInput& e) {
     ROS_WARN_STREAM_NAMED(log_name_, "dynamic_reconfigure change refused, values kept: " << e.what());
     config = tuningConfigOf(latest_);  // the answer and parameter_updates carry what holds

@@ -1,6 +1,7 @@
 #pragma once
 
-// Live tuning of the parameters that may change while running (cfg/Tuning.cfg), in the private
+// Live tuning of the parameters that may change while running (the cfg generated from their
+// runtime() declarations, tuning_cfg.hpp), in the private
 // sub-namespace `tuning`, with dynamic_reconfigure's protocol (~tuning/set_parameters, the latched
 // parameter_descriptions and parameter_updates; rqt_reconfigure and dynparam use it). The server is
 // dynamic_reconfigure::Server's few steps, with the cfg's generated code doing the work, plus what

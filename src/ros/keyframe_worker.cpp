@@ -16,22 +16,17 @@ void KeyframeWorker::start() {
   if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
 }
 
-KeyframeWorker::Pushed KeyframeWorker::push(KeyframeInput input) {
-  const std_msgs::Header& header = input.image        ? input.image->header
-                                   : input.compressed ? input.compressed->header
-                                                      : input.keyframe->header;
+KeyframeWorker::Pushed KeyframeWorker::push(KeyframeInputPtr input) {
   size_t bytes = 0;
   try {
-    bytes = input.image        ? checkedInputBytes(*input.image, limits_)
-            : input.compressed ? checkedInputBytes(*input.compressed, limits_)
-                               : checkedInputBytes(*input.keyframe, limits_);
+    bytes = input->checkedBytes(limits_);
     if (bytes > queue_.capacityBytes()) {
       throw mild::InvalidInput("a message of " + std::to_string(bytes) + " bytes is larger than the whole queue (" +
                                std::to_string(queue_.capacityBytes()) + " bytes, ~queue_mb)");
     }
   } catch (const std::exception& e) {
-    reject(header, e.what());
-    return Pushed::kRejected;  // the message is released as the caller returns
+    reject(input->header(), e.what());
+    return Pushed::kRejected;  // the message is released as this returns
   }
   return queue_.push(std::move(input), bytes) ? Pushed::kQueued : Pushed::kDroppedOldest;
 }
@@ -66,7 +61,7 @@ void KeyframeWorker::run() {
     }
   }
   while (auto item = queue_.pop()) {
-    process(*item);
+    process(**item);
     queue_.done();
   }
 }
@@ -84,32 +79,21 @@ void KeyframeWorker::refreshSnapshot(const mild::RobotTeam& team) {
 void KeyframeWorker::process(const KeyframeInput& input) {
   ProcessedKeyframe out;
   try {
-    out.header = input.image        ? input.image->header
-                 : input.compressed ? input.compressed->header
-                                    : input.keyframe->header;
-    std::optional<uint64_t> id;
-    mild::Features features;
-    if (input.image || input.compressed) {
-      out.image = input.image ? imageFromMsg(*input.image, limits_.max_image_pixels)
-                              : imageFromMsg(*input.compressed, limits_.max_image_pixels);
-    } else {
-      if (input.keyframe->has_id) id = input.keyframe->id;
-      features = featuresFromMsg(*input.keyframe);
-    }
+    out.header = input.header();
+    mild::Observation observation = input.observe(limits_, out.image);
+    const size_t robot = observation.robot;
     const bool keypoints = hooks_.wants_keypoints && hooks_.wants_keypoints();
     const auto lock = shared_.lock();
     mild::RobotTeam& team = *shared_.team;
-    if (input.robot < shared_.failure.size() && !shared_.failure[input.robot].empty()) {
-      throw mild::InvalidInput(shared_.failure[input.robot]);
+    if (robot < shared_.failure.size() && !shared_.failure[robot].empty()) {
+      throw mild::InvalidInput(shared_.failure[robot]);
     }
     // Only this call changes the detector; it throws before changing anything.
-    out.result = out.image.image.empty() ? team.process(input.robot, std::move(features), out.header.stamp.toSec(), id)
-                                         : team.process(input.robot, out.image.image, out.image.format,
-                                                        out.header.stamp.toSec(), std::nullopt, input.camera);
+    out.result = team.process(std::move(observation));
     ++shared_.changes;
-    out.database_size = team.robot(input.robot).size();
+    out.database_size = team.robot(robot).size();
     if (keypoints) {
-      out.query_keypoints = team.robot(input.robot).record(out.result.query_index).keypoints;
+      out.query_keypoints = team.robot(robot).record(out.result.query_index).keypoints;
       if (!out.result.candidates.empty()) {
         const mild::LoopCandidate& best = out.result.candidates.front();
         out.candidate_keypoints = team.robot(best.robot).record(best.index).keypoints;

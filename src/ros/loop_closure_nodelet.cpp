@@ -22,6 +22,7 @@
 #include "detector_tuning.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/params/parameters.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
@@ -140,7 +141,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
     for (size_t r = 0; r < robots_.size(); ++r) {
       robots_[r]->inputs = std::make_unique<RobotInputs>(robots_[r]->nh, pnh, r, settings_, getName(),
-                                                         [this](KeyframeInput item) { enqueue(std::move(item)); });
+                                                         [this](KeyframeInputPtr item) { enqueue(std::move(item)); });
     }
     const mild::DetectorParams& params = shared_.team->params();
     NODELET_INFO(
@@ -157,7 +158,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   }
 
   // Callbacks only queue: the nodelet manager's threads are never held up by detection.
-  void enqueue(KeyframeInput item) {
+  void enqueue(KeyframeInputPtr item) {
     if (worker_->push(std::move(item)) == KeyframeWorker::Pushed::kDroppedOldest) {
       NODELET_WARN_THROTTLE(2.0,
                             "input queue full (queue_size %d, queue_mb %d): dropped the oldest keyframe, %zu dropped "

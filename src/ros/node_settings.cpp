@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/params/parameters.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -70,13 +71,10 @@ void visitSettings(Settings& s, Visit&& visit) {
 
 template <class T>
 std::string toText(const T& v) {
-  if constexpr (std::is_same_v<T, bool>) {
-    return v ? "true" : "false";
-  } else if constexpr (std::is_same_v<T, std::string>) {
-    return v.empty() ? "\"\"" : v;
-  } else {
-    return std::to_string(v);
+  if constexpr (std::is_same_v<T, std::string>) {
+    if (v.empty()) return "\"\"";
   }
+  return mild::parameterText(v);
 }
 
 }  // namespace
@@ -104,19 +102,7 @@ std::string nodeSettingsMarkdown() {
 NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::string& default_dir) {
   NodeSettings s;
   visitSettings(s, [&](const char* name, auto& field, const mild::Bounds&, const char*) {
-    using T = std::decay_t<decltype(field)>;
-    if constexpr (std::is_same_v<T, bool>) {
-      if (auto v = source.getBool(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, std::string>) {
-      if (auto v = source.getString(name)) field = *v;
-    } else {
-      if (auto v = source.getInt(name)) {
-        if (*v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max()) {
-          throw InvalidInput("parameter ~" + std::string(name) + " is out of range: " + std::to_string(*v));
-        }
-        field = static_cast<int>(*v);
-      }
-    }
+    mild::readParameter(source, name, field, "~" + std::string(name));
   });
   if (!s.use_image_input && !s.use_keyframe_input) {
     throw InvalidInput("~use_image_input and ~use_keyframe_input are both false: nothing to listen to");

@@ -17,10 +17,9 @@ RobotInputs::RobotInputs(ros::NodeHandle& nh, ros::NodeHandle& pnh, size_t robot
   if (settings_.use_image_input && settings_.use_camera_info) subscribeCameraInfo(nh_);
   if (settings_.use_image_input) subscribeImages(nh_, pnh);
   if (settings_.use_keyframe_input) {
-    keyframe_sub_ = nh_.subscribe<mild_lcd::Keyframe>("keyframe", settings_.queue_size,
-                                                      [this](const mild_lcd::KeyframeConstPtr& m) {
-                                                        enqueue_({nullptr, nullptr, m, {}, robot_});
-                                                      });
+    keyframe_sub_ = nh_.subscribe<mild_lcd::Keyframe>(
+        "keyframe", settings_.queue_size,
+        [this](const mild_lcd::KeyframeConstPtr& m) { enqueue_(keyframeInput(m, robot_)); });
     ROS_INFO_STREAM_NAMED(log_name_, "subscribed to " << keyframe_sub_.getTopic() << " (keyframe features)");
   }
   spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
@@ -62,17 +61,15 @@ void RobotInputs::subscribeImages(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
     const std::string topic = nh.resolveName("image") + "/compressed";
     compressed_sub_ = nh.subscribe<sensor_msgs::CompressedImage>(
         topic, settings_.queue_size, [this](const sensor_msgs::CompressedImageConstPtr& m) {
-          enqueue_({nullptr, m, nullptr, latestCamera(), robot_});
+          enqueue_(compressedImageInput(m, latestCamera(), robot_));
         });
     ROS_INFO_STREAM_NAMED(log_name_, "subscribed to " << topic << " (compressed images, decoded by mild_lcd)");
     return;
   }
   image_sub_ = transport_->subscribe(
       "image", settings_.queue_size,
-      [this](const sensor_msgs::ImageConstPtr& m) {
-        enqueue_({m, nullptr, nullptr, latestCamera(), robot_});
-      },
-      ros::VoidPtr(), image_transport::TransportHints(settings_.image_transport, ros::TransportHints(), pnh));
+      [this](const sensor_msgs::ImageConstPtr& m) { enqueue_(imageInput(m, latestCamera(), robot_)); }, ros::VoidPtr(),
+      image_transport::TransportHints(settings_.image_transport, ros::TransportHints(), pnh));
   ROS_INFO_STREAM_NAMED(
       log_name_, "subscribed to " << image_sub_.getTopic() << " (transport " << settings_.image_transport << ")");
 }

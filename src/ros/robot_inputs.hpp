@@ -23,7 +23,7 @@ namespace mild_lcd {
 
 class RobotInputs {
  public:
-  using Enqueue = std::function<void(KeyframeInput)>;
+  using Enqueue = std::function<void(KeyframeInputPtr)>;
   // Subscribes as the settings say. `log_name` names the nodelet in messages.
   RobotInputs(ros::NodeHandle& nh, ros::NodeHandle& pnh, size_t robot, const NodeSettings& settings,
               const std::string& log_name, Enqueue enqueue);

@@ -8,22 +8,9 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/ros/tuning_cfg.hpp"
 
 namespace mild_lcd {
-
-std::string tuningName(const std::string& parameter) {
-  std::string name = parameter;
-  const size_t slash = name.find('/');
-  if (slash != std::string::npos) name[slash] = '_';
-  return name;
-}
-
-std::string parameterName(const std::string& tuning_name) {
-  for (const std::string& p : mild::runtimeParameterNames()) {
-    if (tuningName(p) == tuning_name) return p;
-  }
-  throw mild::InvalidInput("dynamic_reconfigure parameter '" + tuning_name + "' is not a runtime parameter");
-}
 
 std::string unreadTuningEntries(const dynamic_reconfigure::Config& request) {
   std::string problems;

@@ -175,6 +175,183 @@ json measurePersistence(const KeyframeAt& keyframe_at, size_t n) {
       {"keyframes", n}, {"features", report.features}, {"file_mb", file_mb}, {"save_s", save_s}, {"load_s", load_s}};
 }
 
+// What every size is measured on: the stored keyframes (a prefix of keyframe_at), the queries and
+// the sizes.
+struct Workload {
+  std::optional<mild::tools::SequenceKeyframes> walk;
+  std::optional<mild::tools::SyntheticKeyframes> synthetic;
+  std::vector<mild::DescriptorList> queries;
+  KeyframeAt keyframe_at;
+  std::vector<size_t> sizes;
+};
+
+// Keyframes: a real walk's frames (--sequence), or real frames replicated to any size. Filled in
+// place: keyframe_at reads the workload's own keyframes.
+void loadWorkload(const Options& opt, const std::vector<std::string>& dirs, const mild::FeatureExtractor& extractor,
+                  Workload& w) {
+  w.sizes = parseSizes(opt.sizes);
+  if (!opt.sequence.empty()) {
+    w.walk.emplace(opt.sequence, extractor, opt.queries);
+    w.queries = w.walk->queries();
+    w.keyframe_at = [&w](size_t k) { return w.walk->keyframe(k); };
+    // Prefixes of the walk, and the whole walk.
+    const size_t total = w.walk->size();
+    w.sizes.erase(std::remove_if(w.sizes.begin(), w.sizes.end(), [&](size_t n) { return n >= total; }), w.sizes.end());
+    w.sizes.push_back(total);
+    if (!opt.json) {
+      std::printf("walk %s: %zu stored keyframes, %zu held-out queries; up to %d features per keyframe; one thread\n",
+                  opt.sequence.c_str(), total, w.queries.size(), opt.features);
+    }
+    return;
+  }
+  std::vector<mild::DescriptorList> real;
+  for (const auto& dir : dirs) {
+    for (const auto& path : mild::tools::openImageSequence(dir).frames) {
+      const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+      if (!image.empty()) real.push_back(extractor.extract(image, mild::PixelFormat::kGray).descriptors);
+    }
+  }
+  w.synthetic.emplace(std::move(real), static_cast<size_t>(opt.features));
+  for (int q = 0; q < opt.queries; ++q) w.queries.push_back(w.synthetic->query(q));
+  w.keyframe_at = [&w](size_t k) { return w.synthetic->keyframe(k); };
+  if (!opt.json) {
+    std::printf("%zu real frames from %zu sequence(s); %d features per keyframe; %d queries per size; one thread\n",
+                w.synthetic->realFrames(), dirs.size(), opt.features, opt.queries);
+  }
+}
+
+// One mild_lcd index built from the first n keyframes and asked every query.
+struct IndexRun {
+  Timing timing;
+  mild::QueryStats work;
+  InsertTiming insert;
+  double bytes_per_feature = 0.0;
+  std::vector<uint64_t> pairs;  // per query: pairs (query feature, stored feature) within d0, what votes
+};
+
+// Inserts the first n keyframes into `db` and asks it every query.
+IndexRun insertAndQuery(mild::KeyframeDatabase& db, const Workload& w, size_t n) {
+  IndexRun run;
+  run.insert = insertAll(db, w.keyframe_at, n);
+  run.bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
+  for (const auto& q : w.queries) {
+    auto t = Clock::now();
+    const auto r = db.query(q);
+    run.timing.samples.push_back(msSince(t));
+    run.work += r.stats;
+    run.pairs.push_back(r.stats.votes);
+  }
+  return run;
+}
+
+IndexRun measureIndex(const Workload& w, size_t n, const mild::DatabaseParams& params) {
+  mild::KeyframeDatabase db(params);
+  return insertAndQuery(db, w, n);
+}
+
+// The same index with each entry's first 64 bits beside its id.
+mild::DatabaseParams inlinePrefixes(mild::DatabaseParams params) {
+  params.index.inline_prefixes = true;
+  return params;
+}
+
+// The same, with max_bucket_entries: query time bounded as the map grows.
+mild::DatabaseParams boundedBuckets(mild::DatabaseParams params, uint32_t bound, uint32_t max_candidates) {
+  params.index.max_bucket_entries = bound;
+  params.index.max_candidates_per_feature = max_candidates;
+  return params;
+}
+
+// The MIH columns: the index unbounded, queried with early termination (mih_et), then the same
+// index without it (the threshold at 64: mih), then its exact brute force on small maps.
+struct MihRun {
+  Timing mih, mih_et, brute;
+  mild::QueryStats work;
+  InsertTiming insert;
+  double bytes_per_feature = 0.0;
+  std::vector<uint64_t> pairs;
+};
+
+MihRun measureMih(const Options& opt, const Workload& w, size_t n, const mild::DatabaseParams& et_params,
+                  const mild::DatabaseParams& full_params) {
+  MihRun run;
+  mild::KeyframeDatabase db(et_params);
+  IndexRun with_et = insertAndQuery(db, w, n);
+  run.mih_et = std::move(with_et.timing);
+  run.work = with_et.work;
+  run.insert = with_et.insert;
+  run.bytes_per_feature = with_et.bytes_per_feature;
+  run.pairs = std::move(with_et.pairs);
+  db.setSimilarityParams(full_params.similarity);
+  for (const auto& q : w.queries) {
+    auto t = Clock::now();
+    const auto r = db.query(q);
+    run.mih.samples.push_back(msSince(t));
+    (void)r;
+  }
+  if (n <= opt.brute_max_keyframes) {
+    for (int q = 0; q < std::min<int>(opt.brute_queries, static_cast<int>(w.queries.size())); ++q) {
+      auto t = Clock::now();
+      const auto r = db.query(w.queries[q], mild::kAllKeyframes, mild::SearchMode::kExact);
+      run.brute.samples.push_back(msSince(t));
+      (void)r;
+    }
+  }
+  return run;
+}
+
+// faiss on the same descriptors, range search within d0: IndexBinaryMultiHash for every query,
+// IndexBinaryFlat (exact) for the first faiss_exact_queries, whose pairs are the truth the others'
+// recall is measured against.
+struct FaissRun {
+  Timing mih, exact;
+  double bytes_per_feature = 0.0;
+  size_t mih_pairs_first = 0, exact_pairs_first = 0;  // of the first query, a check on both
+  std::vector<uint64_t> pairs, exact_pairs;
+};
+
+FaissRun measureFaiss(const Options& opt, const Workload& w, size_t n, const mild::DatabaseParams& et_params) {
+  FaissRun run;
+#if MILD_HAVE_FAISS
+  const int bits = et_params.descriptor_bytes * 8;
+  mild::tools::FaissBaselines faiss(bits, et_params.index.tablesFor(bits));
+  for (size_t k = 0; k < n; ++k) faiss.add(w.keyframe_at(k));
+  run.bytes_per_feature = faiss.entryBytesPerFeature();
+  const int d0 = et_params.similarity.scaledTo(bits).max_distance;
+  for (const auto& q : w.queries) {
+    auto t = Clock::now();
+    const size_t found = faiss.queryMultiHash(q, d0);
+    run.mih.samples.push_back(msSince(t));
+    if (&q == &w.queries.front()) run.mih_pairs_first = found;
+    run.pairs.push_back(found);
+  }
+  for (int q = 0; q < std::min<int>(opt.faiss_exact_queries, static_cast<int>(w.queries.size())); ++q) {
+    auto t = Clock::now();
+    const size_t found = faiss.queryExact(w.queries[q], d0);
+    run.exact.samples.push_back(msSince(t));
+    if (q == 0) run.exact_pairs_first = found;
+    run.exact_pairs.push_back(found);
+  }
+#else
+  (void)opt, (void)w, (void)n, (void)et_params;  // built without faiss: no columns (main() says so)
+#endif
+  return run;
+}
+
+// Our reproduction of the 2017 index design.
+Timing measure2017(const Workload& w, size_t n, const mild::DatabaseParams& et_params) {
+  Timing timing;
+  mild::tools::Mild2017Index old(et_params);
+  for (size_t k = 0; k < n; ++k) old.insert(w.keyframe_at(k));
+  for (const auto& q : w.queries) {
+    auto t = Clock::now();
+    const auto r = old.query(q);
+    timing.samples.push_back(msSince(t));
+    (void)r;
+  }
+  return timing;
+}
+
 int run(const Options& opt) {
 #if !MILD_HAVE_FAISS
   // faiss (Debian's libfaiss-dev, with OpenMP) is this benchmark's only use of it, and optional.
@@ -188,43 +365,16 @@ int run(const Options& opt) {
 
   mild::FeatureParams feature_params;
   feature_params.type = opt.feature_type;
-  feature_params.orb.num_features = feature_params.brisk.num_features = feature_params.akaze.num_features =
-      opt.features;
+  // Every extractor's budget, whichever the type names.
+  mild::forEachSection(feature_params.extractors, [&](auto& section) { section.num_features = opt.features; });
   const std::unique_ptr<mild::FeatureExtractor> extractor_owner = mild::makeFeatureExtractor(feature_params);
   const mild::FeatureExtractor& extractor = *extractor_owner;
-  // Keyframes: a real walk's frames (--sequence), or real frames replicated to any size.
-  std::optional<mild::tools::SequenceKeyframes> walk;
-  std::optional<mild::tools::SyntheticKeyframes> synthetic;
-  std::vector<mild::DescriptorList> queries;
-  KeyframeAt keyframe_at;
-  std::vector<size_t> sizes = parseSizes(opt.sizes);
-  if (!opt.sequence.empty()) {
-    walk.emplace(opt.sequence, extractor, opt.queries);
-    queries = walk->queries();
-    keyframe_at = [&walk](size_t k) { return walk->keyframe(k); };
-    // Prefixes of the walk, and the whole walk.
-    sizes.erase(std::remove_if(sizes.begin(), sizes.end(), [&](size_t n) { return n >= walk->size(); }), sizes.end());
-    sizes.push_back(walk->size());
-    if (!opt.json) {
-      std::printf("walk %s: %zu stored keyframes, %zu held-out queries; up to %d features per keyframe; one thread\n",
-                  opt.sequence.c_str(), walk->size(), queries.size(), opt.features);
-    }
-  } else {
-    std::vector<mild::DescriptorList> real;
-    for (const auto& dir : dirs) {
-      for (const auto& path : mild::tools::openImageSequence(dir).frames) {
-        const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-        if (!image.empty()) real.push_back(extractor.extract(image, mild::PixelFormat::kGray).descriptors);
-      }
-    }
-    synthetic.emplace(std::move(real), static_cast<size_t>(opt.features));
-    for (int q = 0; q < opt.queries; ++q) queries.push_back(synthetic->query(q));
-    keyframe_at = [&synthetic](size_t k) { return synthetic->keyframe(k); };
-    if (!opt.json) {
-      std::printf("%zu real frames from %zu sequence(s); %d features per keyframe; %d queries per size; one thread\n",
-                  synthetic->realFrames(), dirs.size(), opt.features, opt.queries);
-    }
-  }
+  Workload workload;
+  loadWorkload(opt, dirs, extractor, workload);
+  const std::optional<mild::tools::SequenceKeyframes>& walk = workload.walk;
+  const std::vector<mild::DescriptorList>& queries = workload.queries;
+  const KeyframeAt& keyframe_at = workload.keyframe_at;
+  const std::vector<size_t>& sizes = workload.sizes;
 
   // The MIH columns are the index without the bound on bucket length or the query budget (early
   // termination at 20 of the first 64 bits as shipped); the bounded column adds both, and with the
@@ -259,77 +409,26 @@ int run(const Options& opt) {
       continue;
     }
     json row = {{"keyframes", n}};
-    Timing mih, mih_et, baseline, brute, faiss_mih, faiss_exact;
-    double faiss_bytes_per_feature = 0.0;
-    size_t faiss_mih_pairs = 0, faiss_exact_pairs = 0;  // of the first query, a check on both
-    // Pairs (query feature, stored feature) within d0 found per query: what votes. Against the
-    // exact range search of the first faiss_exact_queries queries, each index's recall of them.
-    std::vector<uint64_t> unbounded_pairs, bounded_pairs, faiss_pairs, exact_pairs;
-    mild::QueryStats work;
-    InsertTiming insert;
-    double bytes_per_feature = 0.0;
-    {
-      mild::KeyframeDatabase db(et_params);
-      insert = insertAll(db, keyframe_at, n);
-      bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
-      for (const auto& q : queries) {
-        auto t = Clock::now();
-        const auto r = db.query(q);
-        mih_et.samples.push_back(msSince(t));
-        work += r.stats;
-        unbounded_pairs.push_back(r.stats.votes);
-      }
-      // Without early termination: the same index, queried with the threshold at 64.
-      db.setSimilarityParams(full_params.similarity);
-      for (const auto& q : queries) {
-        auto t = Clock::now();
-        const auto r = db.query(q);
-        mih.samples.push_back(msSince(t));
-        (void)r;
-      }
-      if (n <= opt.brute_max_keyframes) {
-        for (int q = 0; q < std::min<int>(opt.brute_queries, static_cast<int>(queries.size())); ++q) {
-          auto t = Clock::now();
-          const auto r = db.query(queries[q], mild::kAllKeyframes, mild::SearchMode::kExact);
-          brute.samples.push_back(msSince(t));
-          (void)r;
-        }
-      }
-    }
-    Timing inlined;
-    double inline_insert_ms = 0.0, inline_bytes_per_feature = 0.0;
-    if (opt.inline_prefixes) {  // the same index with each entry's first 64 bits beside its id
-      mild::DatabaseParams inline_params = et_params;
-      inline_params.index.inline_prefixes = true;
-      mild::KeyframeDatabase db(inline_params);
-      inline_insert_ms = insertAll(db, keyframe_at, n).mean_ms;
-      inline_bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
-      for (const auto& q : queries) {
-        auto t = Clock::now();
-        const auto r = db.query(q);
-        inlined.samples.push_back(msSince(t));
-        (void)r;
-      }
-    }
-    Timing bounded;
-    mild::QueryStats bounded_work;
-    InsertTiming bounded_insert;
-    double bounded_bytes_per_feature = 0.0;
-    if (opt.bounded > 0) {  // the same, with max_bucket_entries: query time bounded as the map grows
-      mild::DatabaseParams bounded_params = et_params;
-      bounded_params.index.max_bucket_entries = opt.bounded;
-      bounded_params.index.max_candidates_per_feature = opt.max_candidates;
-      mild::KeyframeDatabase db(bounded_params);
-      bounded_insert = insertAll(db, keyframe_at, n);
-      bounded_bytes_per_feature = static_cast<double>(db.memoryBytes()) / static_cast<double>(db.featureCount());
-      for (const auto& q : queries) {
-        auto t = Clock::now();
-        const auto r = db.query(q);
-        bounded.samples.push_back(msSince(t));
-        bounded_work += r.stats;
-        bounded_pairs.push_back(r.stats.votes);
-      }
-    }
+    // Each baseline in turn, in this order (the machine's state moves with the run).
+    const MihRun unbounded = measureMih(opt, workload, n, et_params, full_params);
+    const Timing& mih = unbounded.mih;
+    const Timing& mih_et = unbounded.mih_et;
+    const Timing& brute = unbounded.brute;
+    const mild::QueryStats& work = unbounded.work;
+    const InsertTiming& insert = unbounded.insert;
+    const double bytes_per_feature = unbounded.bytes_per_feature;
+    const std::vector<uint64_t>& unbounded_pairs = unbounded.pairs;
+    const IndexRun inline_run = opt.inline_prefixes ? measureIndex(workload, n, inlinePrefixes(et_params)) : IndexRun{};
+    const Timing& inlined = inline_run.timing;
+    const double inline_insert_ms = inline_run.insert.mean_ms, inline_bytes_per_feature = inline_run.bytes_per_feature;
+    const IndexRun bounded_run =
+        opt.bounded > 0 ? measureIndex(workload, n, boundedBuckets(et_params, opt.bounded, opt.max_candidates))
+                        : IndexRun{};
+    const Timing& bounded = bounded_run.timing;
+    const mild::QueryStats& bounded_work = bounded_run.work;
+    const InsertTiming& bounded_insert = bounded_run.insert;
+    const double bounded_bytes_per_feature = bounded_run.bytes_per_feature;
+    const std::vector<uint64_t>& bounded_pairs = bounded_run.pairs;
     // The shipped configuration's figures: the bounded database when its bound is the shipped one.
     const bool shipped_measured = opt.max_candidates == mild::MihParams{}.max_candidates_per_feature &&
                                   (shipped_bound == 0 || (opt.bounded == shipped_bound && !bounded.samples.empty()));
@@ -337,39 +436,15 @@ int run(const Options& opt) {
     const mild::QueryStats& shipped_work = shipped_bound == 0 ? work : bounded_work;
     const InsertTiming& shipped_insert = shipped_bound == 0 ? insert : bounded_insert;
     const double shipped_bytes = shipped_bound == 0 ? bytes_per_feature : bounded_bytes_per_feature;
-#if MILD_HAVE_FAISS
-    if (n <= opt.faiss_max_keyframes) {  // faiss, on the same descriptors, range search within d0
-      mild::tools::FaissBaselines faiss(bits, et_params.index.tablesFor(bits));
-      for (size_t k = 0; k < n; ++k) faiss.add(keyframe_at(k));
-      faiss_bytes_per_feature = faiss.entryBytesPerFeature();
-      const int d0 = et_params.similarity.scaledTo(bits).max_distance;
-      for (const auto& q : queries) {
-        auto t = Clock::now();
-        const size_t found = faiss.queryMultiHash(q, d0);
-        faiss_mih.samples.push_back(msSince(t));
-        if (&q == &queries.front()) faiss_mih_pairs = found;
-        faiss_pairs.push_back(found);
-      }
-      for (int q = 0; q < std::min<int>(opt.faiss_exact_queries, static_cast<int>(queries.size())); ++q) {
-        auto t = Clock::now();
-        const size_t found = faiss.queryExact(queries[q], d0);
-        faiss_exact.samples.push_back(msSince(t));
-        if (q == 0) faiss_exact_pairs = found;
-        exact_pairs.push_back(found);
-      }
-    }
-#endif
-
-    if (!opt.skip_baseline && bits == 256) {  // the 2017 design is ORB's 16 tables of 16 bits
-      mild::tools::Mild2017Index old(et_params);
-      for (size_t k = 0; k < n; ++k) old.insert(keyframe_at(k));
-      for (const auto& q : queries) {
-        auto t = Clock::now();
-        const auto r = old.query(q);
-        baseline.samples.push_back(msSince(t));
-        (void)r;
-      }
-    }
+    const FaissRun faiss = n <= opt.faiss_max_keyframes ? measureFaiss(opt, workload, n, et_params) : FaissRun{};
+    const Timing& faiss_mih = faiss.mih;
+    const Timing& faiss_exact = faiss.exact;
+    const double faiss_bytes_per_feature = faiss.bytes_per_feature;
+    const size_t faiss_mih_pairs = faiss.mih_pairs_first, faiss_exact_pairs = faiss.exact_pairs_first;
+    const std::vector<uint64_t>& faiss_pairs = faiss.pairs;
+    const std::vector<uint64_t>& exact_pairs = faiss.exact_pairs;
+    // The 2017 design is ORB's 16 tables of 16 bits.
+    const Timing baseline = !opt.skip_baseline && bits == 256 ? measure2017(workload, n, et_params) : Timing{};
     const std::optional<double> brute_ms = brute.samples.empty() ? std::nullopt : std::optional<double>(brute.median());
     const std::optional<double> base_ms =
         baseline.samples.empty() ? std::nullopt : std::optional<double>(baseline.median());

@@ -52,16 +52,8 @@ std::optional<std::pair<cv::Mat, mild::PixelFormat>> readFrame(const std::string
   if (image.empty()) return std::nullopt;
   if (image.depth() == CV_16U) image.convertTo(image, CV_8U, 1.0 / 256.0);
   if (image.depth() != CV_8U) return std::nullopt;
-  switch (image.channels()) {
-    case 1:
-      return std::make_pair(image, mild::PixelFormat::kGray);
-    case 3:
-      return std::make_pair(image, mild::PixelFormat::kBgr);
-    case 4:
-      return std::make_pair(image, mild::PixelFormat::kBgra);
-    default:
-      return std::nullopt;
-  }
+  if (const auto format = mild::decodedPixelFormat(image.channels())) return std::make_pair(image, *format);
+  return std::nullopt;
 }
 
 json timingJson(const std::vector<double>& samples) {

@@ -15,6 +15,7 @@
 
 #include <cstring>
 
+#include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
@@ -53,17 +54,8 @@ void expectSameResults(const DetectionResult& a, const DetectionResult& b) {
   }
 }
 
-class DatabaseFile : public ::testing::Test {
+class DatabaseFile : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_db_test_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
   std::vector<uint8_t> bytes(const std::string& file) const {
     std::ifstream in(file, std::ios::binary);
     return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
@@ -71,7 +63,6 @@ class DatabaseFile : public ::testing::Test {
   void write(const std::string& file, const std::vector<uint8_t>& data) const {
     std::ofstream(file, std::ios::binary).write(reinterpret_cast<const char*>(data.data()), data.size());
   }
-  fs::path dir_;
 };
 
 TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {

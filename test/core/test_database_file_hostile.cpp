@@ -21,6 +21,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
@@ -64,16 +65,8 @@ bool inChildWithin(double seconds, const std::function<int()>& body) {
   return false;
 }
 
-class HostileFiles : public ::testing::Test {
+class HostileFiles : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_hostile_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
   static std::string contents(const std::string& file) {
     std::ifstream in(file, std::ios::binary);
     return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
@@ -93,7 +86,6 @@ class HostileFiles : public ::testing::Test {
     }
     return n;
   }
-  fs::path dir_;
 };
 
 TEST_F(HostileFiles, AFifoIsRefusedWithoutBlocking) {

@@ -9,6 +9,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
@@ -81,15 +82,8 @@ INSTANTIATE_TEST_SUITE_P(Extractors, DescriptorWidths,
                                            std::make_pair("akaze", 61)),
                          [](const auto& info) { return std::string(info.param.first); });
 
-class MapFiles : public ::testing::Test {
+class MapFiles : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_widths_" + std::to_string(::getpid()));
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  fs::path dir_;
 };
 
 TEST_F(MapFiles, RecordTheWidthAndAreRefusedByADetectorOfAnother) {

@@ -32,7 +32,7 @@ TEST(FeatureBudget, ALargerImageOfTheSameSceneKeepsMoreFeatures) {
   for (const char* type : {"orb", "brisk", "akaze"}) {
     FeatureParams params;
     params.type = type;
-    params.orb.num_features = params.brisk.num_features = params.akaze.num_features = 100;
+    forEachSection(params.extractors, [](auto& section) { section.num_features = 100; });
     const size_t small_count = makeFeatureExtractor(params)->extract(frame, PixelFormat::kGray).keypoints.size();
     const size_t large_count = makeFeatureExtractor(params)->extract(large, PixelFormat::kGray).keypoints.size();
     // At most the budget (OpenCV's ORB may return a few fewer: it fills its pyramid level by level).

@@ -108,6 +108,26 @@ Candidate mihCandidates(const KeyframeDatabase& db) {
   };
 }
 
+// The near-past policy on its own (near_past.hpp): the band reaches back while the matched counts
+// stay above the background's median + kappa MADs, tolerating `tolerance` keyframes below in a row,
+// never below `floor`, and covers the whole session while there is no background.
+TEST(NearPastBand, ExtendsWhileAboveTheBackground) {
+  std::vector<uint32_t> matched(100);
+  for (size_t k = 0; k < matched.size(); ++k) matched[k] = 10 + static_cast<uint32_t>(k % 3);  // background 10-12
+  for (size_t k = 95; k < 100; ++k) matched[k] = 50;                                           // the place being left
+  matched[93] = 50;  // beyond two below-level keyframes: tolerated (tolerance 2)
+  NearPastRule rule;
+  EXPECT_EQ(nearPastBand(matched, 100, rule), 7u);
+  rule.tolerance = 0;
+  EXPECT_EQ(nearPastBand(matched, 100, rule), 5u) << "no keyframe below the level tolerated";
+  rule.floor = 97;
+  EXPECT_EQ(nearPastBand(matched, 100, rule), 3u) << "never below the session's start";
+  rule = NearPastRule{};
+  EXPECT_EQ(nearPastBand(matched, 20, rule), 20u) << "fewer than min_background eligible: all of the session";
+  std::vector<uint32_t> flat(100, 10);
+  EXPECT_EQ(nearPastBand(flat, 100, rule), 0u) << "nothing above the background";
+}
+
 TEST(KeyframeDatabase, IndexSimilarityEqualsTheFormulaOverTheCandidateSet) {
   for (auto [m, r] : std::vector<std::pair<int, int>>{{16, 0}, {8, 1}, {12, 2}, {32, 0}}) {
     for (bool burstiness : {true, false}) {

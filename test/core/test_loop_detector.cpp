@@ -152,7 +152,7 @@ TEST(LoopDetector, ATiledTextureYieldsAtMostNumFeatures) {
   cv::Mat tiled;
   cv::repeat(tile, 40, 40, tiled);  // 640 x 640 of one 16-pixel tile
   DetectorParams p = fixtureParams();
-  p.features.orb.num_features = 800;
+  p.features.section<OrbParams>().num_features = 800;
   LoopDetector detector(p);
   const DetectionResult r = detector.process(tiled, PixelFormat::kGray, 0.0);
   const size_t budget = featureBudget(800, tiled.total(), p.features.reference_pixels);
@@ -298,7 +298,7 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
   auto verifier = std::make_unique<RecordingVerifier>();
   const RecordingVerifier* seen = verifier.get();
   detector.setVerifier(std::move(verifier));
-  const OrbExtractor orb(p.features.orb);
+  const OrbExtractor orb(p.features.section<OrbParams>());
   const auto camera_of = [](size_t i) { return CameraIntrinsics{200.0 + i, 200.0 + i, 160.0, 120.0}; };
   std::vector<uint64_t> queries_with_candidates;
   for (size_t i = 0; i < 20; ++i) {

@@ -6,7 +6,7 @@
 #include <random>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
+#include "mild_lcd/filter/filters.hpp"
 
 namespace mild {
 namespace {
@@ -174,7 +174,7 @@ TEST(ExclusiveHypothesisFilter, ShorterSimilarityVectorDropsTheStateBeyondIt) {
 }
 
 TEST(ExclusiveHypothesisFilter, NoLoopLikelihoodGrowsWithTheEligibleKeyframes) {
-  FilterParams p;
+  ExclusiveHypothesisParams p;
   p.no_loop_likelihood = 10.0;
   p.no_loop_reference_keyframes = 450.0;
   p.no_loop_growth = 0.5;
@@ -198,7 +198,7 @@ TEST(ExclusiveHypothesisFilter, ALoopInASmallMapNeedsLessSaliencyThanInALargeOne
   stream.revisit_start = 80;
   stream.revisit_end = 100;
   stream.strength = 3.0;  // z about 8 over noise of robust scale 0.37
-  const auto best_at_end = [&](const FilterParams& params, const Stream& s) {
+  const auto best_at_end = [&](const ExclusiveHypothesisParams& params, const Stream& s) {
     ExclusiveHypothesisFilter filter(params);
     double best = 0.0;
     for (int t = 0; t < s.steps; ++t) {
@@ -207,8 +207,8 @@ TEST(ExclusiveHypothesisFilter, ALoopInASmallMapNeedsLessSaliencyThanInALargeOne
     }
     return best;
   };
-  FilterParams growing;  // the defaults
-  FilterParams constant;
+  ExclusiveHypothesisParams growing;  // the defaults
+  ExclusiveHypothesisParams constant;
   constant.no_loop_growth = 0.0;
   EXPECT_GT(best_at_end(growing, stream), 0.5);
   EXPECT_LT(best_at_end(constant, stream), 0.2);
@@ -218,15 +218,15 @@ TEST(ExclusiveHypothesisFilter, ALoopInASmallMapNeedsLessSaliencyThanInALargeOne
 }
 
 TEST(ExclusiveHypothesisFilter, RejectsInvalidParameters) {
-  FilterParams p;
+  ExclusiveHypothesisParams p;
   p.loop_persistence = 1.5;
   EXPECT_THROW(ExclusiveHypothesisFilter{p}, InvalidInput);
-  p = FilterParams{};
+  p = ExclusiveHypothesisParams{};
   p.motion_kernel = {};
   EXPECT_THROW(ExclusiveHypothesisFilter{p}, InvalidInput);
   p.motion_kernel = {0.0, 0.0};
   EXPECT_THROW(ExclusiveHypothesisFilter{p}, InvalidInput);
-  p = FilterParams{};
+  p = ExclusiveHypothesisParams{};
   p.no_loop_likelihood = 0.0;
   EXPECT_THROW(ExclusiveHypothesisFilter{p}, InvalidInput);
   ExclusiveHypothesisFilter ok;

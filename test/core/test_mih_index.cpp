@@ -146,6 +146,9 @@ TEST(MihIndex, BoundedBucketsKeepTheirNewestEntries) {
   index.insertKeyframe(&other, 1, 13);
   EXPECT_EQ(visited(index, other), (std::set<FeatureId>{13}));
   EXPECT_EQ(index.discardedBuckets(), 0u);
+  index.clear();  // an emptied index has evicted nothing (its counters describe what it holds)
+  EXPECT_EQ(index.evictedEntries(), 0u);
+  EXPECT_EQ(index.entryCount(), 0u);
 }
 
 // Live insertion, as a detector does it: new entries land in the room a merge left after their

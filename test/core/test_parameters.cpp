@@ -42,12 +42,12 @@ TEST(Parameters, BoundsComeFromTheDeclarationAndNameTheParameter) {
     EXPECT_STREQ(e.what(), "index/num_tables must be 0 or [4, 64], got 3");
   }
   FilterParams filter;
-  filter.motion_kernel = {0.5, -1.0};
+  filter.section<ExclusiveHypothesisParams>().motion_kernel = {0.5, -1.0};
   try {
     filter.validate();
     FAIL();
   } catch (const InvalidInput& e) {
-    EXPECT_STREQ(e.what(), "filter/motion_kernel must list 1 to 64 numbers, each >= 0, got the item -1");
+    EXPECT_STREQ(e.what(), "exclusive_hypotheses/motion_kernel must list 1 to 64 numbers, each >= 0, got the item -1");
   }
   FeatureParams features;
   features.type = "sift";
@@ -98,13 +98,45 @@ detector:
   exclusion_seconds: 2.5
 )");
   const DetectorParams p = loadDetectorParams(source);
-  EXPECT_EQ(p.features.orb.num_features, 500);
+  EXPECT_EQ(p.features.section<OrbParams>().num_features, 500);
   EXPECT_EQ(p.database.index.num_tables, 24);
   EXPECT_EQ(p.database.index.radius, 1);
   EXPECT_EQ(p.search, SearchMode::kExact);
-  EXPECT_EQ(p.filter.motion_kernel, (std::vector<double>{1.0, 2.0}));
+  EXPECT_EQ(p.filter.section<ExclusiveHypothesisParams>().motion_kernel, (std::vector<double>{1.0, 2.0}))
+      << "filter/motion_kernel, the name of earlier versions, still sets it";
   EXPECT_DOUBLE_EQ(p.candidates.exclusion_seconds, 2.5);
   EXPECT_EQ(p.candidates.exclusion_frames, DetectorParams{}.candidates.exclusion_frames);
+}
+
+// Each filter reads its own section; the names filter/<name> of earlier versions set <name> in every
+// filter's section that has it, and the current name decides when both are given.
+TEST(Parameters, EachFilterHasItsOwnSectionAndTheEarlierNamesStillWork) {
+  const DetectorParams p = loadDetectorParams(YamlParameterSource::fromString(R"(
+filter:
+  loop_persistence: 0.9
+  no_loop_likelihood: 7
+exclusive_hypotheses:
+  loop_onset: 0.02
+  no_loop_likelihood: 8
+independent_binary:
+  loop_persistence: 0.8
+)"));
+  const auto& exclusive = p.filter.section<ExclusiveHypothesisParams>();
+  const auto& independent = p.filter.section<IndependentBinaryParams>();
+  EXPECT_DOUBLE_EQ(exclusive.loop_persistence, 0.9);
+  EXPECT_DOUBLE_EQ(exclusive.loop_onset, 0.02);
+  EXPECT_DOUBLE_EQ(exclusive.no_loop_likelihood, 8.0);
+  EXPECT_DOUBLE_EQ(independent.loop_persistence, 0.8);
+  EXPECT_DOUBLE_EQ(independent.no_loop_likelihood, 7.0);
+  // independent_binary neither reads nor documents the knobs it ignores.
+  for (const auto& [name, value] : describeParameters(DetectorParams{}, IndependentBinaryParams::kSection)) {
+    EXPECT_TRUE(name == "independent_binary/loop_persistence" || name == "independent_binary/no_loop_likelihood")
+        << name;
+  }
+  EXPECT_THROW(loadDetectorParams(YamlParameterSource::fromString("independent_binary: {loop_onset: 0.1}")),
+               InvalidInput);
+  EXPECT_EQ(legacyParameterName("exclusive_hypotheses/loop_onset"), "filter/loop_onset");
+  EXPECT_EQ(legacyParameterName("orb/num_features"), "");
 }
 
 void expectRejected(const std::string& yaml, const std::string& mention) {
@@ -126,9 +158,12 @@ TEST(Parameters, RejectsBadValuesNamingTheParameter) {
   expectRejected("verification: {num_tables: 8}", "verification/num_tables");
   expectRejected("index: {min_bucket_cap: -3}", "index/min_bucket_cap");  // unsigned
   expectRejected("similarity: {search: fast}", "similarity/search");
-  expectRejected("filter: {loop_onset: 2}", "filter/loop_onset");
-  expectRejected("filter: {motion_kernel: 3}", "filter/motion_kernel");  // not a list
-  expectRejected("filter: {motion_kernel: [a, b]}", "filter/motion_kernel");
+  expectRejected("exclusive_hypotheses: {loop_onset: 2}", "exclusive_hypotheses/loop_onset");
+  expectRejected("exclusive_hypotheses: {motion_kernel: 3}", "exclusive_hypotheses/motion_kernel");  // not a list
+  expectRejected("exclusive_hypotheses: {motion_kernel: [a, b]}", "exclusive_hypotheses/motion_kernel");
+  expectRejected("filter: {motion_kernel: 3}", "filter/motion_kernel");  // an earlier name, as written
+  expectRejected("filter: {loop_onset: 2}", "exclusive_hypotheses/loop_onset");
+  expectRejected("independent_binary: {no_loop_likelihood: 0}", "independent_binary/no_loop_likelihood");
   expectRejected("detector: {max_candidates: 0}", "detector/max_candidates");
   expectRejected("detector: {min_probability: 1.5}", "detector/min_probability");
   expectRejected("index: {cap_buckets: maybe}", "index/cap_buckets");

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -90,6 +91,40 @@ TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
             << lone_m.average_precision << "); robot b's own candidates " << intra_b << "\n";
   EXPECT_GE(team_m.recall_at_100_precision, 0.8);
   EXPECT_GE(team_m.recall_at_100_precision, lone_m.recall_at_100_precision - 0.02);
+}
+
+// detector/max_candidates is per keyframe, however many maps are asked. Robots "a" and "b" map the
+// same stretch of the sample, so that robot "c", coming back to it, finds candidates in both maps and
+// its own: asked per map, as the team once did, it published up to three times the parameter.
+TEST(RobotTeam, NeverPublishesMoreThanMaxCandidatesPerKeyframe) {
+  for (const int max_candidates : {1, 2}) {
+    DetectorParams params;
+    params.candidates.max_candidates = max_candidates;
+    RobotTeam team(params, {"a", "b", "c"});
+    constexpr int kMapped = 100;
+    for (int k = 0; k < kMapped; k += 2) {
+      team.process(0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+      team.process(1, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(1000 + k));
+    }
+    size_t from_both_maps = 0;
+    for (int j = kMapped; j < kFrames; j += 2) {
+      const DetectionResult r = team.process(2, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
+      ASSERT_LE(r.candidates.size(), static_cast<size_t>(max_candidates)) << "keyframe " << j;
+      bool in_a = false, in_b = false;
+      for (const LoopCandidate& c : r.candidates) {
+        in_a |= c.robot == 0;
+        in_b |= c.robot == 1;
+      }
+      from_both_maps += in_a && in_b;
+      EXPECT_TRUE(
+          std::is_sorted(r.candidates.begin(), r.candidates.end(),
+                         [](const LoopCandidate& x, const LoopCandidate& y) { return x.probability > y.probability; }))
+          << "best first";
+    }
+    if (max_candidates > 1) {
+      EXPECT_GT(from_both_maps, 0u) << "the bound keeps the best across maps, not one map's";
+    }
+  }
 }
 
 TEST(RobotTeam, ATeamOfOneIsALoneDetector) {

@@ -13,6 +13,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
@@ -55,16 +56,8 @@ Metrics scoreFrom(int first, const std::vector<ScoredPair>& pairs) {
   return evaluate(truth, scored, 40);
 }
 
-class Sessions : public ::testing::Test {
+class Sessions : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_sessions_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
   // The uninterrupted run, once for all tests.
   static const std::vector<ScoredPair>& uninterrupted() {
     static const std::vector<ScoredPair> pairs = [] {
@@ -75,7 +68,6 @@ class Sessions : public ::testing::Test {
     }();
     return pairs;
   }
-  fs::path dir_;
 };
 
 TEST_F(Sessions, AMapReloadedAsANewSessionFindsTheSecondHalfsLoopsAsWellAsOneRun) {

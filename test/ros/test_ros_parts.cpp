@@ -17,8 +17,10 @@
 #include <boost/make_shared.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/io/database_file.hpp"
+#include "mild_lcd/params/parameters.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
@@ -69,7 +71,7 @@ TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
   EXPECT_NE(errorOf([] { settingsFrom("database_dir: maps\n"); }).find("absolute"), std::string::npos);
 }
 
-// dynamic_reconfigure (cfg/Tuning.cfg) serves exactly the runtime parameters, with the detector's
+// dynamic_reconfigure (the generated cfg, tuning_cfg.hpp) serves exactly the runtime parameters, with the detector's
 // defaults and ranges the detector accepts; its values travel through the parameter registry.
 TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
   std::set<std::string> cfg, runtime;
@@ -80,7 +82,7 @@ TEST(Tuning, TheCfgIsTheRuntimeParametersWithTheDetectorsDefaultsAndRanges) {
   const mild::DetectorParams defaults;
   EXPECT_EQ(mild::describeParameters(paramsFromTuning(mild_lcd::TuningConfig::__getDefault__(), defaults)),
             mild::describeParameters(defaults))
-      << "cfg/Tuning.cfg's defaults differ from the detector's";
+      << "the generated cfg's defaults differ from the detector's";
   for (const auto& bound : {mild_lcd::TuningConfig::__getMin__(), mild_lcd::TuningConfig::__getMax__()}) {
     mild::LoopDetector detector;
     EXPECT_NO_THROW(detector.retune(paramsFromTuning(bound, defaults))) << "a cfg bound the detector refuses";
@@ -158,15 +160,8 @@ TEST(NodeSettings, TheDatabaseFolderDefaultsToThePathsFolderOrRosHome) {
   EXPECT_FALSE(nodeSettingDocs().empty());
 }
 
-class Store : public ::testing::Test {
+class Store : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_store_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
   static std::unique_ptr<mild::LoopDetector> detector(size_t keyframes) {
     mild::DetectorParams p;
     p.verification.enabled = false;
@@ -188,7 +183,6 @@ class Store : public ::testing::Test {
   NodeSettings settings(const std::string& extra = "") const {
     return settingsFrom("database_dir: " + dir_.string() + "\n" + extra);
   }
-  fs::path dir_;
 };
 
 // Live tuning never waits for the detector (a merge or a save may hold it for seconds; the
@@ -336,10 +330,10 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
   };
   KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
-  worker.push({image(200, 150, 1.0), nullptr, nullptr, {}});
-  worker.push({image(1, 1, 2.0), nullptr, nullptr, {}});           // thinner than ORB's border: stored, no features
-  worker.push({image(8, 8, 3.0, "32FC1"), nullptr, nullptr, {}});  // unusable encoding
-  worker.push({image(2000, 1000, 4.0), nullptr, nullptr, {}});     // over max_image_pixels
+  worker.push(imageInput(image(200, 150, 1.0)));
+  worker.push(imageInput(image(1, 1, 2.0)));           // thinner than ORB's border: stored, no features
+  worker.push(imageInput(image(8, 8, 3.0, "32FC1")));  // unusable encoding
+  worker.push(imageInput(image(2000, 1000, 4.0)));     // over max_image_pixels
   worker.waitIdle();
   const WorkerCounters c = worker.counters();
   EXPECT_EQ(c.processed, 2u) << "the thin image is a keyframe, answered";
@@ -357,7 +351,7 @@ TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
   KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
-  for (int i = 0; i < 10; ++i) worker.push({image(160, 120, i), nullptr, nullptr, {}});
+  for (int i = 0; i < 10; ++i) worker.push(imageInput(image(160, 120, i)));
   while (worker.counters().queued > 9) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   std::thread stopper([&] { worker.stop(); });
   while (worker.counters().discarded == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -386,6 +380,67 @@ TEST(DebugImages, KeepTheDecodedChannelOrder) {
   cache.remember(2, rgb, mild::PixelFormat::kBgr);  // the same bytes read as BGR: blue
   EXPECT_NE(cache.find(1).at<uint8_t>(5, 5), cache.find(2).at<uint8_t>(5, 5));
   EXPECT_EQ(cache.find(1).at<uint8_t>(5, 5), 76) << "red's luma (0.299 x 255)";
+}
+
+// The picture shows what it says: query left and candidate right at half resolution, the inlier
+// drawn as a green line from the query's keypoint to the candidate's, unmatched keypoints as grey
+// circles, and a label; without a candidate, the query alone labelled in red.
+TEST(DebugImages, DrawTheInliersWhereTheKeypointsAre) {
+  const cv::Mat query(200, 320, CV_8UC1, cv::Scalar(0));
+  const cv::Mat candidate(100, 160, CV_8UC1, cv::Scalar(0));  // cached at half resolution, as the cache keeps it
+  const cv::Mat query_half(100, 160, CV_8UC1, cv::Scalar(0));
+  const std::vector<cv::KeyPoint> query_kps = {cv::KeyPoint(80, 120, 8), cv::KeyPoint(240, 40, 8)};
+  const std::vector<cv::KeyPoint> candidate_kps = {cv::KeyPoint(200, 160, 8)};
+  mild::DetectionResult result;
+  result.query_id = 7;
+  mild::LoopCandidate best;
+  best.id = 3;
+  best.verification.verified = true;
+  best.verification.inliers = 1;
+  best.verification.inlier_matches = {mild::FeatureMatch{0, 0, 10}};
+  result.candidates.push_back(best);
+  const cv::Mat canvas = drawDebugImage(query_half, query_kps, candidate, candidate_kps, result);
+  ASSERT_EQ(canvas.type(), CV_8UC3);
+  ASSERT_EQ(canvas.size(), cv::Size(320, 100));
+  const auto green = [&](cv::Point p) {
+    const cv::Vec3b c = canvas.at<cv::Vec3b>(p);
+    return c[1] > 100 && c[0] < c[1] / 2 && c[2] < c[1] / 2;
+  };
+  // Query keypoint 0 is at (40, 60) in the half image, candidate keypoint 0 at (100, 80) + 160.
+  const cv::Point from(40, 60), to(160 + 100, 80);
+  const cv::Point middle((from.x + to.x) / 2, (from.y + to.y) / 2);
+  int on_line = 0;
+  for (int dy = -1; dy <= 1; ++dy) on_line += green(middle + cv::Point(0, dy)) ? 1 : 0;
+  EXPECT_GT(on_line, 0) << "the inlier's line passes between the two keypoints";
+  EXPECT_FALSE(green(cv::Point(40, 90))) << "nothing green away from the match";
+  // The unmatched query keypoint (120, 20) is drawn as a grey circle of its (halved) size.
+  bool grey = false;
+  for (int y = 14; y <= 26 && !grey; ++y) {
+    for (int x = 114; x <= 126 && !grey; ++x) {
+      const cv::Vec3b c = canvas.at<cv::Vec3b>(y, x);
+      grey = c[0] > 40 && c[0] == c[1] && c[1] == c[2];
+    }
+  }
+  EXPECT_TRUE(grey) << "the unmatched keypoint is drawn where it is";
+  EXPECT_EQ(canvas.at<cv::Vec3b>(95, 80), cv::Vec3b(0, 0, 0)) << "the images themselves are untouched elsewhere";
+  // The label (green: verified) is written in the top-left corner.
+  int label = 0;
+  for (int y = 2; y < 18; ++y) {
+    for (int x = 5; x < 150; ++x) label += green(cv::Point(x, y)) ? 1 : 0;
+  }
+  EXPECT_GT(label, 20) << "a green label for a verified loop";
+
+  mild::DetectionResult none;
+  const cv::Mat alone = drawDebugImage(query_half, query_kps, cv::Mat(), {}, none);
+  ASSERT_EQ(alone.size(), cv::Size(160, 100)) << "the query alone";
+  int red = 0;
+  for (int y = 2; y < 18; ++y) {
+    for (int x = 5; x < 150; ++x) {
+      const cv::Vec3b c = alone.at<cv::Vec3b>(y, x);
+      red += c[2] > 200 && c[0] < 50 && c[1] < 50 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(red, 20) << "\"no candidate\" in red";
 }
 
 // A few hundred bytes of JPEG whose header claims 20000 x 20000 pixels are refused on the header.
@@ -486,19 +541,19 @@ TEST(Worker, TheQueueIsBoundedInBytesAndOversizeInputsAreRejectedAsTheyArrive) {
   hooks.publish = [&](const ProcessedKeyframe&) { std::lock_guard<std::mutex> wait(gate); };
   KeyframeWorker worker(shared, 100, 200 * 1000, InputLimits{2000 * 2000, 10000}, hooks);
   worker.start();
-  EXPECT_EQ(worker.push({image(200, 150, 1.0), nullptr, nullptr, {}}), KeyframeWorker::Pushed::kQueued);
+  EXPECT_EQ(worker.push(imageInput(image(200, 150, 1.0))), KeyframeWorker::Pushed::kQueued);
   while (worker.counters().queued > 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));  // in progress
   auto oversize = image(320, 240, 2.0);
   oversize->data.resize(oversize->data.size() * 2);
-  EXPECT_EQ(worker.push({oversize, nullptr, nullptr, {}}), KeyframeWorker::Pushed::kRejected);
+  EXPECT_EQ(worker.push(imageInput(oversize)), KeyframeWorker::Pushed::kRejected);
   EXPECT_EQ(oversize.use_count(), 1) << "not kept by the worker";
-  EXPECT_EQ(worker.push({image(500, 500, 3.0), nullptr, nullptr, {}}), KeyframeWorker::Pushed::kRejected)
+  EXPECT_EQ(worker.push(imageInput(image(500, 500, 3.0))), KeyframeWorker::Pushed::kRejected)
       << "larger than the whole queue";
-  for (int i = 0; i < 5; ++i) worker.push({image(200, 150, 4.0 + i), nullptr, nullptr, {}});  // 30 KB each
+  for (int i = 0; i < 5; ++i) worker.push(imageInput(image(200, 150, 4.0 + i)));  // 30 KB each
   WorkerCounters c = worker.counters();
   EXPECT_LE(c.queued_bytes, 200u * 1000u);
   EXPECT_EQ(c.rejected, 2u);
-  for (int i = 0; i < 5; ++i) worker.push({image(300, 300, 10.0 + i), nullptr, nullptr, {}});  // 90 KB each
+  for (int i = 0; i < 5; ++i) worker.push(imageInput(image(300, 300, 10.0 + i)));  // 90 KB each
   c = worker.counters();
   EXPECT_LE(c.queued_bytes, 200u * 1000u);
   EXPECT_EQ(c.queued, 2u) << "two of 90 KB fit in 200 KB";
@@ -676,6 +731,44 @@ TEST(Conversions, MetricPosesAndCorrespondencesArePublishedWhenAskedFor) {
   EXPECT_EQ(m.inlier_candidate_pixels, (std::vector<float>{5, 6, 7, 8}));
 }
 
+// Each input kind has its adapter, and each yields the one observation the pipeline takes.
+TEST(KeyframeInputs, EachKindBecomesOneObservation) {
+  const mild::CameraIntrinsics camera{300.0, 300.0, 100.0, 75.0};
+  DecodedImage decoded;
+  const KeyframeInputPtr raw = imageInput(image(200, 150, 1.5), camera, 2);
+  EXPECT_EQ(raw->robot(), 2u);
+  EXPECT_DOUBLE_EQ(raw->header().stamp.toSec(), 1.5);
+  EXPECT_GE(raw->checkedBytes(InputLimits{}), 200u * 150u) << "the pixels and the header";
+  const mild::Observation from_image = raw->observe(InputLimits{}, decoded);
+  ASSERT_TRUE(from_image.image.has_value());
+  EXPECT_EQ(from_image.image->pixels.size(), cv::Size(200, 150));
+  EXPECT_EQ(decoded.image.size(), cv::Size(200, 150)) << "kept for the debug image";
+  EXPECT_EQ(from_image.features.camera, camera);
+  EXPECT_DOUBLE_EQ(from_image.stamp, 1.5);
+  EXPECT_FALSE(from_image.id.has_value());
+  EXPECT_EQ(from_image.robot, 2u);
+
+  auto compressed = boost::make_shared<sensor_msgs::CompressedImage>();
+  compressed->header.stamp = ros::Time(2.0);
+  compressed->format = "png";
+  cv::imencode(".png", cv::Mat(120, 160, CV_8UC1, cv::Scalar(7)), compressed->data);
+  const mild::Observation from_png = compressedImageInput(compressed, {}, 1)->observe(InputLimits{}, decoded);
+  ASSERT_TRUE(from_png.image.has_value());
+  EXPECT_EQ(from_png.image->pixels.size(), cv::Size(160, 120));
+  EXPECT_EQ(from_png.robot, 1u);
+
+  auto keyframe = boost::make_shared<mild_lcd::Keyframe>();
+  keyframe->header.stamp = ros::Time(3.0);
+  keyframe->has_id = true;
+  keyframe->id = 42;
+  const mild::Observation from_features = keyframeInput(keyframe)->observe(InputLimits{}, decoded);
+  EXPECT_FALSE(from_features.image.has_value());
+  EXPECT_TRUE(decoded.image.empty()) << "no image to draw on";
+  EXPECT_EQ(from_features.id, std::optional<uint64_t>(42));
+  EXPECT_DOUBLE_EQ(from_features.stamp, 3.0);
+  EXPECT_TRUE(from_features.features.keypoints.empty());
+}
+
 TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
   SharedDetector shared;
   shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
@@ -684,8 +777,8 @@ TEST(Worker, AnImagesCameraIsStoredWithItsKeyframe) {
   KeyframeWorker worker(shared, 10, 256u << 20, InputLimits{1000 * 1000, 10000}, hooks);
   worker.start();
   const mild::CameraIntrinsics camera{300.0, 300.0, 100.0, 75.0};
-  worker.push({image(200, 150, 1.0), nullptr, nullptr, camera});
-  worker.push({image(200, 150, 2.0), nullptr, nullptr, {}});
+  worker.push(imageInput(image(200, 150, 1.0), camera));
+  worker.push(imageInput(image(200, 150, 2.0)));
   worker.waitIdle();
   ASSERT_EQ(shared.robot(0).size(), 2u);
   EXPECT_EQ(shared.robot(0).record(0).camera, camera);

@@ -55,9 +55,12 @@ TEST(Tuning, StartsFromTheNodesValuesAndAppliesChangesBetweenKeyframes) {
   EXPECT_EQ(valueOf(now.ints, "detector_exclusion_frames").value, 8) << "what was not named stays";
 
   // Out of range: dynamic_reconfigure keeps it within the cfg's bounds, which the detector accepts.
+  // From 2, so that only the clamp to the lower bound (1) gives 1.
   change.doubles.clear();
+  change.ints[0].value = 2;
+  ASSERT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 2);
   change.ints[0].value = 0;
-  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 1);
+  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 1) << "clamped to the cfg's minimum";
 
   TopicLog<mild_lcd::LoopClosure> outputs("/loop_closure");
   ASSERT_TRUE(outputs.waitForPublisher(20.0));

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "../common/run_command.hpp"
+#include "../common/scratch_folder.hpp"
 
 namespace fs = std::filesystem;
 
@@ -29,17 +30,8 @@ ProcessResult mildOffline(const std::string& args) {
   return mild::test::runCommand(std::string(MILD_OFFLINE_BIN) + " " + args);
 }
 
-class MildOffline : public ::testing::Test {
+class MildOffline : public mild::test::ScratchFolderTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("mild_offline_test_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  fs::path dir_;
 };
 
 std::string readFile(const std::string& path) {

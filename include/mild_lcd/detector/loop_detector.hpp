@@ -11,7 +11,7 @@
 
 #include "mild_lcd/detector/candidate_scorer.hpp"
 #include "mild_lcd/features/feature_source.hpp"
-#include "mild_lcd/filter/temporal_filter.hpp"
+#include "mild_lcd/filter/filters.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
 #include "mild_lcd/verification/candidate_verifier.hpp"
@@ -110,6 +110,32 @@ struct DetectionResult {
   StepStats stats;
 };
 
+// Where in a map a keyframe may find candidates: keyframes [0, eligible), less the near-past band
+// when one is given. Another robot's map is all of it: its keyframes are never "a moment ago".
+struct MapScope {
+  KeyframeIndex eligible = kAllKeyframes;
+  std::optional<NearPastRule> near_past;
+};
+
+// What one map answers for a keyframe (LoopDetector::queryMap): its similarity, the temporal
+// filter's belief over it, and the best separated keyframes as candidates, not yet verified.
+struct MapAnswer {
+  QueryResult query;                      // Phi' against every keyframe in scope, and the query's stats
+  std::vector<LoopCandidate> candidates;  // at most max_candidates, by belief
+  double query_ms = 0.0;
+  double filter_ms = 0.0;
+};
+
+class LoopDetector;
+
+// A map a keyframe is looked up in besides its detector's own (RobotTeam: another robot's), through
+// a temporal filter of its own for this pair of maps.
+struct OtherMap {
+  const LoopDetector* map = nullptr;
+  TemporalFilter* filter = nullptr;
+  uint32_t robot = 0;  // LoopCandidate::robot of its candidates
+};
+
 // A stored keyframe, as handed to verifiers and clients (e.g. the sparse-match service).
 struct KeyframeRecord {
   uint64_t id = 0;
@@ -184,11 +210,23 @@ class LoopDetector {
   // far + 1) is used; CapacityError once that would pass kMaxKeyframeId.
   // `camera`: the image's intrinsics when known (they give verified loops a relative pose).
   DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
-                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {});
+                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {},
+                          const std::vector<OtherMap>& others = {}, uint32_t robot = 0);
   // Same, for features computed elsewhere (e.g. by the SLAM front-end). Their descriptors must have
   // the database's width (descriptorBytes()). Their camera is stored with the keyframe; their depths
   // serve this query's verification only.
-  DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
+  // `others`: maps to look the keyframe up in besides this one (RobotTeam); their candidates are
+  // verified, scored and ranked with this map's, and max_candidates bounds them all together.
+  // `robot`: LoopCandidate::robot of this map's candidates and DetectionResult::query_robot.
+  DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt,
+                          const std::vector<OtherMap>& others = {}, uint32_t robot = 0);
+
+  // The one "query a map" step, for this detector's own keyframes and for another's (RobotTeam):
+  // `query` against this map's keyframes in `scope`, `filter`'s belief over them (it is updated),
+  // and up to `max_candidates` of them, local maxima of the belief at least suppression_radius
+  // apart. Changes neither the map nor anything but `filter`.
+  MapAnswer queryMap(const DescriptorList& query, const MapScope& scope, TemporalFilter& filter,
+                     size_t max_candidates) const;
 
   // Replaces everything the detector has learnt by `state` (the index is rebuilt from the
   // descriptors with this detector's parameters). continue_session = true resumes exactly where the
@@ -210,14 +248,6 @@ class LoopDetector {
   // Throws InvalidInput, changing nothing, when the state is inconsistent or shares an id.
   void merge(DetectorState state);
   PreparedRestore prepareMerge(DetectorState state) const;  // reads this detector: hold its lock
-
-  // Candidates for this detector's keyframe query_index from another map (another robot's, in a
-  // RobotTeam): chosen from `belief` over map's keyframes (a temporal filter's output for
-  // `similarity`), verified against the query (with its depths) and scored and ranked as this
-  // detector's own. Reads both detectors; changes neither.
-  std::vector<LoopCandidate> candidatesIn(const LoopDetector& map, const std::vector<double>& belief,
-                                          const std::vector<double>& similarity, KeyframeIndex query_index,
-                                          std::vector<float> query_depths = {}) const;
 
   // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
   KeyframeIndex sessionStart() const { return session_start_; }
@@ -246,12 +276,12 @@ class LoopDetector {
   // or from the state.
   PreparedRestore build(DetectorState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
   KeyframeIndex eligibleCount(double stamp) const;
-  // Local maxima of `belief` over map's keyframes, best first (this detector's or another's).
-  std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief, const std::vector<double>& similarity,
-                                              const LoopDetector& map) const;
-  // Verifies (when verifying), scores, judges and ranks candidates in `map` for keyframe query_index.
-  void judge(std::vector<LoopCandidate>& candidates, KeyframeIndex query_index, std::vector<float> query_depths,
-             const LoopDetector& map) const;
+  // Where this detector's own keyframe at `stamp` may find candidates (exclusion, near-past band).
+  MapScope ownScope(double stamp) const;
+  // Verifies (when verifying) each candidate against the query, in the map it came from
+  // (maps[i] for candidates[i]), then scores and judges it.
+  void judge(std::vector<LoopCandidate>& candidates, const Features& query,
+             const std::vector<const LoopDetector*>& maps) const;
 
   DetectorParams params_;
   std::unique_ptr<FeatureExtractor> extractor_;

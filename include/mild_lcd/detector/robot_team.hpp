@@ -6,8 +6,11 @@
 // robot's map, through a temporal filter per ordered pair of robots (robot A's keyframes against
 // robot B's map): the filter's motion model needs neighbouring map entries to be neighbouring places
 // and its queries to be one robot's consecutive keyframes, which holds within a pair and would not
-// for the robots' keyframes interleaved in one map. Inter-robot candidates are verified, scored and
-// ranked as the robot's own; LoopCandidate::robot tells which map a candidate is in.
+// for the robots' keyframes interleaved in one map. The robot's detector runs its one pipeline over
+// its own map and these (LoopDetector::process with OtherMap): inter-robot candidates are verified,
+// scored and ranked with the robot's own, max_candidates bounds them all together, and
+// LoopCandidate::robot tells which map a candidate is in. The pair filters are not saved with the
+// maps (database_file.hpp says why).
 
 #include <memory>
 #include <optional>
@@ -15,6 +18,7 @@
 #include <vector>
 
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/observation.hpp"
 
 namespace mild {
 
@@ -33,12 +37,19 @@ class RobotTeam {
   const LoopDetector& robot(size_t robot) const { return *robots_.at(robot); }
   const DetectorParams& params() const { return robots_.front()->params(); }
 
-  // A keyframe of `robot`, as LoopDetector::process, with the other robots' candidates added:
-  // result.query_robot = robot, each candidate's robot its map's. Throws InvalidInput (changing
+  // A keyframe of observation.robot, as LoopDetector::process (its image's features extracted by
+  // that robot's detector), with the other robots' maps asked too: result.query_robot = the robot,
+  // each candidate's robot its map's, at most max_candidates in all. Throws InvalidInput (changing
   // nothing) for a robot out of range and whatever the robot's detector refuses.
-  DetectionResult process(size_t robot, Features features, double stamp, std::optional<uint64_t> id = std::nullopt);
+  DetectionResult process(Observation observation);
+  // The same, for callers holding the parts.
+  DetectionResult process(size_t robot, Features features, double stamp, std::optional<uint64_t> id = std::nullopt) {
+    return process(Observation::ofFeatures(std::move(features), stamp, id, robot));
+  }
   DetectionResult process(size_t robot, const cv::Mat& image, PixelFormat format, double stamp,
-                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {});
+                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {}) {
+    return process(Observation::ofImage(image, format, stamp, id, camera, robot));
+  }
 
   // After robot's map was replaced, reset or merged (a load, a reset): the pair filters that look
   // at it or from it start over from "no loop", since their hypotheses were its old keyframes.
@@ -53,7 +64,8 @@ class RobotTeam {
   size_t memoryBytes() const;
 
  private:
-  void addOtherRobots(size_t robot, DetectionResult& result, const std::vector<float>& depths);
+  // The maps robot's keyframes are looked up in besides its own, each through its pair filter.
+  std::vector<OtherMap> otherMaps(size_t robot);
   TemporalFilter& pairFilter(size_t from, size_t to) { return *pair_filters_[from * robots_.size() + to]; }
 
   std::vector<std::string> names_;

@@ -17,6 +17,8 @@ struct AkazeParams {
   int octave_layers = 4;
 
   static constexpr const char* kSection = "akaze";
+  static constexpr const char* kDoc =
+      "AKAZE with its M-LDB descriptor (OpenCV), features/type akaze: 486 bits in 61 bytes.";
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
@@ -33,6 +35,7 @@ struct AkazeParams {
 // OpenCV AKAZE with the package's parameters. Not thread-safe; use one per thread.
 class AkazeExtractor : public FeatureExtractor {
  public:
+  using Params = AkazeParams;
   static constexpr const char* kName = "akaze";
   static constexpr int kDescriptorBytes = 61;
 

@@ -15,6 +15,8 @@ struct BriskParams {
   double pattern_scale = 1.0;
 
   static constexpr const char* kSection = "brisk";
+  static constexpr const char* kDoc =
+      "BRISK (OpenCV), features/type brisk: 512-bit descriptors, as OKVIS and maplab use.";
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
@@ -31,6 +33,7 @@ struct BriskParams {
 // OpenCV BRISK with the package's parameters. Not thread-safe; use one per thread.
 class BriskExtractor : public FeatureExtractor {
  public:
+  using Params = BriskParams;
   static constexpr const char* kName = "brisk";
   static constexpr int kDescriptorBytes = 64;
 

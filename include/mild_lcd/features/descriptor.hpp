@@ -93,4 +93,7 @@ cv::Mat descriptorsToMat(const DescriptorList& descriptors);
 // Appends each descriptor's `bytes` bytes to `out` (the layout of ROS messages and map files).
 void appendDescriptorBytes(const DescriptorList& descriptors, std::vector<uint8_t>& out);
 
+// A Hamming distance given per 256 bits (the parameters' unit), for descriptors of `bits` bits.
+inline int scaleDistance(int per_256_bits, int bits) { return (per_256_bits * bits + 128) / 256; }
+
 }  // namespace mild

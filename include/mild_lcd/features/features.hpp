@@ -1,5 +1,6 @@
 #pragma once
 
+#include <optional>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -30,6 +31,10 @@ struct Features {
 // Throws InvalidInput, naming the problem, when the camera is malformed (CameraIntrinsics::wellFormed)
 // or there are depths but not one per keypoint.
 void checkCameraAndDepths(const Features& features);
+
+// The channel order OpenCV's decoders (imread, imdecode) give an image of `channels` channels: 1
+// grey, 3 BGR, 4 BGRA; nullopt for any other count.
+std::optional<PixelFormat> decodedPixelFormat(int channels);
 
 // Converts an 8-bit image of the given format to one grey channel. Throws InvalidInput for an empty
 // image, a depth other than 8 bits, or a channel count that does not match the format.

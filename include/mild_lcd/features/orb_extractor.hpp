@@ -15,6 +15,7 @@ struct OrbParams {
   int edge_threshold = 31;
 
   static constexpr const char* kSection = "orb";
+  static constexpr const char* kDoc = "ORB (OpenCV), features/type orb: 256-bit descriptors.";
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
@@ -36,6 +37,7 @@ struct OrbParams {
 // (OpenCV's detector keeps state); use one per thread.
 class OrbExtractor : public FeatureExtractor {
  public:
+  using Params = OrbParams;
   static constexpr const char* kName = "orb";
   static constexpr int kDescriptorBytes = 32;
 

@@ -1,10 +1,57 @@
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "mild_lcd/filter/temporal_filter.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
 
 namespace mild {
+
+// The parameters of ExclusiveHypothesisFilter (below), section exclusive_hypotheses/. The names
+// filter/<name> of earlier versions are read too (parameters.cpp).
+struct ExclusiveHypothesisParams {
+  double loop_persistence = 0.95;
+  double loop_onset = 0.01;
+  std::vector<double> motion_kernel = {0.3, 1.0, 0.6};
+  double no_loop_likelihood = 10.0;
+  double no_loop_growth = 0.5;
+  double no_loop_reference_keyframes = 450.0;
+  int candidate_window = 3;
+
+  static constexpr const char* kSection = "exclusive_hypotheses";
+  static constexpr const char* kDoc =
+      "The temporal filter of filter/type exclusive_hypotheses (the default): one Bayesian filter over exclusive "
+      "loop hypotheses (filter/exclusive_hypothesis_filter.hpp).";
+  template <class Self, class Visit>
+  static void declare(Self& p, Visit&& v) {
+    v("loop_persistence", p.loop_persistence, Bounds::probability(),
+      "P(a loop continues from one keyframe to the next).");
+    v("loop_onset", p.loop_onset, Bounds::probability(),
+      "P(a loop starts at this keyframe), spread evenly over the eligible keyframes.");
+    v("motion_kernel", p.motion_kernel, Bounds::list(1, 64, Bounds::atLeast(0)),
+      "Where the matched keyframe moves per new keyframe: weights of advancing 0, 1, 2, ... keyframes along the "
+      "old trajectory (at least one positive). Revisits advance; aliasing tends to stay on one stored keyframe.");
+    v("no_loop_likelihood", p.no_loop_likelihood, Bounds::above(0),
+      "Likelihood of \"no loop\", in units of robust saliency (z), with no_loop_reference_keyframes eligible "
+      "keyframes (see no_loop_growth).");
+    v("no_loop_growth", p.no_loop_growth, Bounds::in(0, 2),
+      "The no-loop likelihood grows as (eligible keyframes / no_loop_reference_keyframes)^no_loop_growth (never "
+      "below 1): the largest saliency among keyframes of no loop grows with their number, from about 3 at 50 "
+      "keyframes to 11-13 at 1,000 on every kind of the bench, real frames included (docs/accuracy.md). 0 = a "
+      "constant no_loop_likelihood, the earlier design.");
+    v("no_loop_reference_keyframes", p.no_loop_reference_keyframes, Bounds::above(0),
+      "Eligible keyframes at which the no-loop likelihood is no_loop_likelihood.");
+    v("candidate_window", p.candidate_window, Bounds::atLeast(0),
+      "A candidate's loop probability is the posterior mass within +-candidate_window keyframes.");
+  }
+  void validate() const;  // throws InvalidInput naming the first invalid field
+};
+
+// The likelihood of "no loop" with n eligible keyframes: no_loop_likelihood scaled by
+// (n / no_loop_reference_keyframes)^no_loop_growth, and at least 1 (a keyframe's own likelihood is
+// never below 1, so below it "no loop" could never win).
+double noLoopLikelihood(const ExclusiveHypothesisParams& params, size_t eligible_keyframes);
 
 // Bayesian filter over the similarity vector (seed paper III.A: "Bayesian inference employs
 // temporal coherency to get a final probability of loop closure based on image similarity").
@@ -47,9 +94,10 @@ namespace mild {
 // keyframe is revised later (the original MILD code rewrote loop flags up to three frames late).
 class ExclusiveHypothesisFilter : public TemporalFilter {
  public:
+  using Params = ExclusiveHypothesisParams;
   static constexpr const char* kName = "exclusive_hypotheses";
-  explicit ExclusiveHypothesisFilter(const FilterParams& params = {});
-  const FilterParams& params() const { return params_; }
+  explicit ExclusiveHypothesisFilter(const Params& params = {});
+  const Params& params() const { return params_; }
   const char* name() const override { return kName; }
 
   // Returns the posterior mass within +-candidate_window of every eligible keyframe.
@@ -66,7 +114,7 @@ class ExclusiveHypothesisFilter : public TemporalFilter {
   void loadState(const std::vector<uint8_t>& bytes) override;
 
  private:
-  FilterParams params_;
+  Params params_;
   std::vector<double> kernel_;  // motion_kernel normalised to sum 1
   std::vector<double> posterior_;
   double no_loop_ = 1.0;

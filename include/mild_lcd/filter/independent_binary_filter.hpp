@@ -3,8 +3,29 @@
 #include <vector>
 
 #include "mild_lcd/filter/temporal_filter.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
 
 namespace mild {
+
+// The parameters of IndependentBinaryFilter (below), section independent_binary/. The names
+// filter/<name> of earlier versions are read too (parameters.cpp).
+struct IndependentBinaryParams {
+  double loop_persistence = 0.95;
+  double no_loop_likelihood = 10.0;
+
+  static constexpr const char* kSection = "independent_binary";
+  static constexpr const char* kDoc =
+      "The temporal filter of filter/type independent_binary: the 2017 MILD design, for comparison "
+      "(filter/independent_binary_filter.hpp).";
+  template <class Self, class Visit>
+  static void declare(Self& p, Visit&& v) {
+    v("loop_persistence", p.loop_persistence, Bounds::probability(),
+      "P(a keyframe's loop continues to the next keyframe).");
+    v("no_loop_likelihood", p.no_loop_likelihood, Bounds::above(0),
+      "Likelihood of \"no loop\" against a keyframe's saliency (s - sigma) / mu.");
+  }
+  void validate() const { validateDeclared(*this); }
+};
 
 // The 2017 MILD design, kept to compare against (filter/type: independent_binary): every stored
 // keyframe j has a two-state loop / no-loop filter of its own, independent of the others.
@@ -20,8 +41,9 @@ namespace mild {
 // rewriting them up to three keyframes late; here nothing is rewritten).
 class IndependentBinaryFilter : public TemporalFilter {
  public:
+  using Params = IndependentBinaryParams;
   static constexpr const char* kName = "independent_binary";
-  explicit IndependentBinaryFilter(const FilterParams& params = {});
+  explicit IndependentBinaryFilter(const Params& params = {});
   const char* name() const override { return kName; }
 
   const std::vector<double>& update(const std::vector<double>& similarity) override;
@@ -32,7 +54,7 @@ class IndependentBinaryFilter : public TemporalFilter {
   void loadState(const std::vector<uint8_t>& bytes) override;
 
  private:
-  FilterParams params_;
+  Params params_;
   std::vector<double> probability_;
   std::vector<double> previous_;
 };

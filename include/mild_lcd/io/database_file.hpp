@@ -20,6 +20,13 @@ namespace mild {
 // stored: it is rebuilt from the descriptors on load, with the loading detector's parameters, so a
 // file written with other index parameters cannot be mixed with this index.
 //
+// A file holds one robot's map. A RobotTeam's pair filters (robot A's keyframes against robot B's
+// map) are not stored: each describes two maps at once, and a file is saved and loaded per robot.
+// Any load, merge or reset of either map makes its hypotheses stale (RobotTeam::mapChanged restarts
+// it from "no loop"), so a stored pair state could only ever be read back when every robot's file
+// is loaded together, exactly as saved. What its loss costs: after a restart, the first few
+// inter-robot keyframes of a revisit, while the filter's belief builds up again.
+//
 // Saving is crash-safe: the file is written under a temporary name of its own in the same folder
 // (created exclusively, never through a link, locked while written), flushed to disk (fsync), then
 // renamed over the target, so a crash at any moment leaves either the previous file or the new

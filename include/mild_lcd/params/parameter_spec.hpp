@@ -44,6 +44,13 @@ class Bounds {
   Bounds runtime() const;
 
   bool isRuntime() const { return runtime_; }
+  // The numeric range, for what describes a parameter elsewhere (the generated dynamic_reconfigure
+  // cfg): -inf/+inf when unbounded on that side.
+  double lower() const { return lo_; }
+  double upper() const { return hi_; }
+  bool lowerOpen() const { return lo_open_; }
+  bool upperOpen() const { return hi_open_; }
+  bool allowsZero() const { return zero_; }
   bool contains(double value) const;
   // "[4, 64]", ">= 1", "0 or [4, 64]", "(0, 1)", "orb, brisk or akaze", "5 numbers >= 0", "".
   std::string text() const;

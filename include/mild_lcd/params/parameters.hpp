@@ -6,24 +6,9 @@
 #include <vector>
 
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
 
 namespace mild {
-
-// Where parameter values come from: a YAML file (YamlParameterSource) or the ROS parameter server
-// (the nodelet's own source). Names are slash-separated paths such as "orb/num_features".
-class ParameterSource {
- public:
-  virtual ~ParameterSource() = default;
-  // Each returns nullopt when the parameter is absent and throws InvalidInput when it is present
-  // with a value of the wrong type.
-  virtual std::optional<double> getDouble(const std::string& name) const = 0;
-  virtual std::optional<int64_t> getInt(const std::string& name) const = 0;
-  virtual std::optional<bool> getBool(const std::string& name) const = 0;
-  virtual std::optional<std::string> getString(const std::string& name) const = 0;
-  virtual std::optional<std::vector<double>> getDoubleList(const std::string& name) const = 0;
-  // Every parameter name the source holds (leaves only).
-  virtual std::vector<std::string> names() const = 0;
-};
 
 // Calls visit(name, field, bounds, doc) for every parameter of DetectorParams (const or not),
 // section by section: fields are int, double, bool, uint32_t, uint64_t, std::string, SearchMode or
@@ -31,7 +16,8 @@ class ParameterSource {
 template <class P, class Visit>
 void visitParameters(P& p, Visit&& visit);
 
-// The sections in their order, each with what it is about (config/default.yaml's section comments).
+// The sections in their order, each with what it is about (config/default.yaml's section comments):
+// each section struct's kDoc, the extension points' from their tables.
 struct ParameterSection {
   std::string name;
   std::string doc;
@@ -47,7 +33,13 @@ std::string parameterMarkdown();
 
 // Reads every parameter the source has (absent ones keep their defaults), rejects unknown names in
 // the detector's namespaces, and validates the result. Throws InvalidInput naming the parameter.
+// The filters' parameters are also read by their names of earlier versions, filter/<name>, which
+// set <name> in every filter's section that has it (legacyParameterName).
 DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorParams& defaults = {});
+
+// The earlier name of a parameter that is still read ("filter/loop_onset" for
+// "exclusive_hypotheses/loop_onset"), or "" when it has none.
+std::string legacyParameterName(const std::string& name);
 
 // The namespaces that belong to the detector (a source may hold other names outside them).
 const std::vector<std::string>& detectorParameterNamespaces();
@@ -57,37 +49,15 @@ const std::vector<std::string>& detectorParameterNamespaces();
 // shape the stored map (features, index, similarity) or the filter's state and are fixed at start-up.
 const std::vector<std::string>& runtimeParameterNames();
 
+// Sets every runtime parameter of `into` to its value in `from`, and only those: what
+// LoopDetector::retune applies, so a parameter declared runtime() is retuned without a list to
+// keep in step.
+void copyRuntimeParameters(const DetectorParams& from, DetectorParams& into);
+
 // Flattened "name: value" lines of every parameter, for logs and --print-config. With a section
 // name, that section's only.
 std::vector<std::pair<std::string, std::string>> describeParameters(const DetectorParams& p,
                                                                     const std::string& section = "");
-
-// A YAML file of nested maps (see config/default.yaml). Throws InvalidInput naming the file when it
-// cannot be read or parsed.
-class YamlParameterSource : public ParameterSource {
- public:
-  static YamlParameterSource fromFile(const std::string& path);
-  static YamlParameterSource fromString(const std::string& yaml, const std::string& origin = "<string>");
-
-  std::optional<double> getDouble(const std::string& name) const override;
-  std::optional<int64_t> getInt(const std::string& name) const override;
-  std::optional<bool> getBool(const std::string& name) const override;
-  std::optional<std::string> getString(const std::string& name) const override;
-  std::optional<std::vector<double>> getDoubleList(const std::string& name) const override;
-  std::vector<std::string> names() const override;
-
- private:
-  struct Value {
-    bool is_list = false;
-    std::vector<std::string> items;
-  };
-  YamlParameterSource() = default;
-  std::optional<std::string> scalar(const std::string& name) const;
-  const Value* find(const std::string& name) const;
-
-  std::string origin_;
-  std::vector<std::pair<std::string, Value>> values_;
-};
 
 // ---------------------------------------------------------------------------------------------
 
@@ -96,15 +66,14 @@ inline std::string searchModeName(SearchMode m) { return m == SearchMode::kExact
 template <class P, class Visit>
 void visitParameters(P& p, Visit&& visit) {
   visitSection(p.features, visit);
-  visitSection(p.features.orb, visit);
-  visitSection(p.features.brisk, visit);
-  visitSection(p.features.akaze, visit);
+  forEachSection(p.features.extractors, [&](auto& section) { visitSection(section, visit); });
   visitSection(p.database.index, visit);
   visitSection(p.database.similarity, visit);
   visit(std::string("similarity/search"), p.search, Bounds::oneOf({"index", "exact"}),
         "\"index\" (multi-index hashing, the method) or \"exact\" (brute force over every stored feature: the "
         "accuracy ceiling, for evaluation only; orders of magnitude slower).");
   visitSection(p.filter, visit);
+  forEachSection(p.filter.filters, [&](auto& section) { visitSection(section, visit); });
   visitSection(p.candidates, visit);
   visitSection(p.verification, visit);
   visitSection(p.scoring, visit);

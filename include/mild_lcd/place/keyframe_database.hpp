@@ -10,6 +10,7 @@
 #include "mild_lcd/common/types.hpp"
 #include "mild_lcd/features/descriptor.hpp"
 #include "mild_lcd/index/mih_index.hpp"
+#include "mild_lcd/place/near_past.hpp"
 #include "mild_lcd/place/similarity.hpp"
 
 namespace mild {
@@ -37,26 +38,6 @@ struct QueryStats {
   uint64_t votes = 0;
 
   QueryStats& operator+=(const QueryStats& o);
-};
-
-// "The place I am still leaving": the newest keyframes before the candidate limit may still show
-// what the query shows (far buildings in view while walking towards them), and would come out as a
-// loop with the near past. The band is measured on the query itself: walking back from the newest
-// eligible keyframe, it extends while the number of query features that have a match in the
-// keyframe stays above the background level of the older keyframes,
-//   median + kappa * 1.4826 MAD  of that count over the newest `background` eligible keyframes,
-// allowing `tolerance` keyframes below it in a row. Keyframes in the band take no part in the query
-// (neither votes nor N, N_f). A revisit is separated from the present by keyframes that look like
-// neither: the band stops there. The band never reaches below `floor` (the start of the current
-// session: older sessions are never "a moment ago", though they count as background); with fewer
-// than `min_background` keyframes eligible, every one of the session is in the band (there is no
-// background to tell the present from).
-struct NearPastRule {
-  double kappa = 2.0;
-  int tolerance = 2;
-  int min_background = 30;
-  int background = 400;
-  KeyframeIndex floor = 0;
 };
 
 struct QueryResult {
@@ -95,6 +76,9 @@ class KeyframeDatabase {
   // is not of the database's width (the cv::Mat overload: unless the matrix is N x width CV_8U). A
   // keyframe may have no features.
   KeyframeIndex insert(const DescriptorList& descriptors);
+  // What insert() checks first, so that a caller can refuse a keyframe before changing anything
+  // else: InvalidInput for another width, CapacityError when 2^32 features or keyframes are reached.
+  void checkRoomFor(const DescriptorList& descriptors) const;
   KeyframeIndex insert(const cv::Mat& descriptors);
   // Many keyframes at once, in order (loading a saved database): the same result as inserting them
   // one by one, with a single merge of the index at the end. Checks every width before adding any.

@@ -62,9 +62,6 @@ struct SimilarityParams {
   SimilarityParams scaledTo(int bits) const;
 };
 
-// A distance given per 256 bits, for descriptors of `bits` bits.
-inline int scaleDistance(int per_256_bits, int bits) { return (per_256_bits * bits + 128) / 256; }
-
 // phi(d) for every distance a supported descriptor can have (0..512), precomputed, with the
 // parameters as given (scale them first).
 class PhiTable {

@@ -15,26 +15,12 @@
 #include <string>
 #include <thread>
 
-#include <sensor_msgs/CompressedImage.h>
-#include <sensor_msgs/Image.h>
-
-#include "mild_lcd/Keyframe.h"
-#include "mild_lcd/common/bounded_queue.hpp"
+#include "mild_lcd/ros/bounded_queue.hpp"
 #include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/keyframe_input.hpp"
 #include "mild_lcd/ros/shared_detector.hpp"
 
 namespace mild_lcd {
-
-// One keyframe as it arrived; exactly one pointer is set. `camera`: an image's intrinsics (from
-// camera_info) when known; a Keyframe message carries its own. `robot`: whose keyframe it is (the
-// index in the team; 0 for one robot).
-struct KeyframeInput {
-  sensor_msgs::ImageConstPtr image;
-  sensor_msgs::CompressedImageConstPtr compressed;
-  mild_lcd::KeyframeConstPtr keyframe;
-  mild::CameraIntrinsics camera;
-  size_t robot = 0;
-};
 
 // One processed keyframe, for the publishers.
 struct ProcessedKeyframe {
@@ -70,7 +56,7 @@ class KeyframeWorker {
   // From any thread; never waits for the detector. A message over its size bounds (InputLimits, or
   // larger than the whole queue) is rejected, counted and warned about here, and released at once;
   // kDroppedOldest: older keyframes were dropped to make room.
-  Pushed push(KeyframeInput input);
+  Pushed push(KeyframeInputPtr input);
   // Removes every waiting keyframe and counts it as discarded; returns how many.
   size_t discardPending();
   // Discards what waits, lets the keyframe in progress finish, and joins the thread.
@@ -88,7 +74,7 @@ class KeyframeWorker {
   void reject(const std_msgs::Header& header, const std::string& why);
 
   SharedDetector& shared_;
-  mild::BoundedQueue<KeyframeInput> queue_;
+  mild::BoundedQueue<KeyframeInputPtr> queue_;
   const InputLimits limits_;
   Hooks hooks_;
   std::thread thread_;

@@ -7,7 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
 
 namespace mild_lcd {
 

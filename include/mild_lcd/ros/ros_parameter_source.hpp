@@ -2,7 +2,7 @@
 
 #include <ros/node_handle.h>
 
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
 
 namespace mild_lcd {
 

@@ -1,9 +1,9 @@
 #pragma once
 
-// The bridge between dynamic_reconfigure's TuningConfig (cfg/Tuning.cfg) and the detector's
-// parameters: a TuningConfig field is a runtime parameter (runtimeParameterNames()) with its first
-// '/' as '_'. Values travel through the one parameter registry (parameters.hpp), so names, types
-// and validation are the detector's own. No master needed: tested in test_ros_parts.
+// The bridge between dynamic_reconfigure's TuningConfig (generated from the declarations,
+// tuning_cfg.hpp) and the detector's parameters: a TuningConfig field is a runtime parameter
+// (runtimeParameterNames()) with its first '/' as '_'. Values travel through the one parameter registry
+// (parameters.hpp), so names, types and validation are the detector's own. No master needed: tested in test_ros_parts.
 
 #include <string>
 
@@ -11,12 +11,9 @@
 
 #include "mild_lcd/TuningConfig.h"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/ros/tuning_cfg.hpp"
 
 namespace mild_lcd {
-
-// "detector/max_candidates" <-> "detector_max_candidates".
-std::string tuningName(const std::string& parameter);
-std::string parameterName(const std::string& tuning_name);
 
 // The entries of a dynamic_reconfigure request that name no tuning parameter, or give one a value
 // of another type than the cfg's (dynamic_reconfigure's own parsing skips both without a word), as

@@ -61,23 +61,32 @@ void LoopDetector::retune(const DetectorParams& next) {
   const auto now = describeParameters(params_);
   const auto wanted = describeParameters(next);
   const auto& runtime = runtimeParameterNames();
-  bool verification_changed = false;
+  const auto changed = [&](const std::string& section) {
+    for (size_t i = 0; i < now.size(); ++i) {
+      if (now[i].second != wanted[i].second && now[i].first.compare(0, section.size() + 1, section + "/") == 0)
+        return true;
+    }
+    return false;
+  };
   for (size_t i = 0; i < now.size(); ++i) {
     if (now[i].second == wanted[i].second) continue;
-    verification_changed |= now[i].first.compare(0, 13, "verification/") == 0;
     if (std::find(runtime.begin(), runtime.end(), now[i].first) == runtime.end()) {
       throw InvalidInput(now[i].first + " cannot change while running (it shapes the stored map or the filter): " +
                          "set it at start-up");
     }
   }
   next.validate();
+  DetectorParams retuned = params_;
+  copyRuntimeParameters(next, retuned);
+  // The parts built from a section are rebuilt when it changed; the candidate parameters are read
+  // where they are used. A part holding the map or the filter's state cannot be rebuilt: its
+  // parameters are not runtime, and the retune test (test_retune) fails when one is declared so.
   std::unique_ptr<CandidateVerifier> verifier;
-  if (verification_changed && dynamic_cast<const GeometricVerifier*>(verifier_.get()) != nullptr) {
-    verifier = std::make_unique<GeometricVerifier>(next.verification);
+  if (changed("verification") && dynamic_cast<const GeometricVerifier*>(verifier_.get()) != nullptr) {
+    verifier = std::make_unique<GeometricVerifier>(retuned.verification);
   }
-  params_.candidates = next.candidates;
-  params_.scoring.decision_probability = next.scoring.decision_probability;
-  params_.verification = next.verification;
+  if (changed("scoring")) scorer_ = CandidateScorer(retuned.scoring);
+  params_ = std::move(retuned);
   if (verifier) verifier_ = std::move(verifier);
   ++retunes_;
 }
@@ -274,7 +283,8 @@ void LoopDetector::checkId(std::optional<uint64_t> id) const {
 }
 
 DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, double stamp,
-                                      std::optional<uint64_t> id, const CameraIntrinsics& camera) {
+                                      std::optional<uint64_t> id, const CameraIntrinsics& camera,
+                                      const std::vector<OtherMap>& others, uint32_t robot) {
   checkId(id);
   if (extractor_->descriptorBytes() != descriptorBytes()) {
     throw InvalidInput("this detector holds " + std::to_string(descriptorBytes()) +
@@ -286,12 +296,53 @@ DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, 
   Features features = extractor_->extract(image, format);
   features.camera = camera;
   const double extract_ms = msSince(start);
-  DetectionResult result = process(std::move(features), stamp, id);
+  DetectionResult result = process(std::move(features), stamp, id, others, robot);
   result.stats.extract_ms = extract_ms;
   return result;
 }
 
-DetectionResult LoopDetector::process(Features features, double stamp, std::optional<uint64_t> id) {
+MapScope LoopDetector::ownScope(double stamp) const {
+  MapScope scope;
+  scope.eligible = eligibleCount(stamp);
+  const CandidateParams& cp = params_.candidates;
+  if (cp.near_past) {
+    NearPastRule near_past;
+    near_past.kappa = cp.near_past_kappa;
+    near_past.tolerance = cp.near_past_tolerance;
+    near_past.min_background = cp.near_past_min_background;
+    near_past.floor = session_start_;
+    scope.near_past = near_past;
+  }
+  return scope;
+}
+
+MapAnswer LoopDetector::queryMap(const DescriptorList& query, const MapScope& scope, TemporalFilter& filter,
+                                 size_t max_candidates) const {
+  MapAnswer answer;
+  auto start = Clock::now();
+  answer.query = database_.query(query, scope.eligible, params_.search, scope.near_past ? &*scope.near_past : nullptr);
+  answer.query_ms = msSince(start);
+  start = Clock::now();
+  const std::vector<double>& belief = filter.update(answer.query.similarity);
+  const std::vector<double>& similarity = answer.query.similarity;
+  for (KeyframeIndex j : separatedBest(belief, similarity, max_candidates,
+                                       static_cast<KeyframeIndex>(params_.candidates.suppression_radius))) {
+    LoopCandidate c;
+    c.index = j;
+    c.id = records_[j].id;
+    c.session = records_[j].session;
+    c.stamp = records_[j].stamp;
+    c.filter_probability = belief[j];
+    c.probability = belief[j];
+    c.similarity = similarity[j];
+    answer.candidates.push_back(c);
+  }
+  answer.filter_ms = msSince(start);
+  return answer;
+}
+
+DetectionResult LoopDetector::process(Features features, double stamp, std::optional<uint64_t> id,
+                                      const std::vector<OtherMap>& others, uint32_t robot) {
   if (features.keypoints.size() != features.descriptors.size()) {
     throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
                        std::to_string(features.descriptors.size()) + " descriptors");
@@ -307,60 +358,62 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
   for (const Descriptor& d : features.descriptors) refuseWidth(d.bytes);
   checkId(id);
   if (!std::isfinite(stamp)) throw InvalidInput("keyframe stamp is not a finite number");
+  database_.checkRoomFor(features.descriptors);  // before the filter moves on
   DetectionResult result;
   result.query_id = id ? *id : next_id_;
+  result.query_robot = robot;
   result.stats.features = features.descriptors.size();
+  const size_t max_candidates = static_cast<size_t>(params_.candidates.max_candidates);
+
+  // This map, then the others: each the same step, each through its own filter.
+  MapAnswer own = queryMap(features.descriptors, ownScope(stamp), *filter_, max_candidates);
+  result.stats.query_ms = own.query_ms;
+  result.stats.filter_ms = own.filter_ms;
+  result.stats.query = own.query.stats;
+  result.stats.eligible_keyframes = own.query.similarity.size();
+  result.stats.near_past_keyframes = own.query.near_past;
+  std::vector<const LoopDetector*> maps(own.candidates.size(), this);
+  for (LoopCandidate& c : own.candidates) c.robot = robot;
+  result.candidates = std::move(own.candidates);
+  for (const OtherMap& other : others) {
+    if (other.map->size() == 0) continue;
+    MapAnswer answer = other.map->queryMap(features.descriptors, MapScope{}, *other.filter, max_candidates);
+    result.stats.query_ms += answer.query_ms;
+    result.stats.query += answer.query.stats;
+    result.stats.filter_ms += answer.filter_ms;
+    for (LoopCandidate& c : answer.candidates) {
+      c.robot = other.robot;
+      result.candidates.push_back(std::move(c));
+      maps.push_back(other.map);
+    }
+  }
 
   auto start = Clock::now();
-  const KeyframeIndex eligible = eligibleCount(stamp);
-  NearPastRule near_past;
-  const CandidateParams& cp = params_.candidates;
-  near_past.kappa = cp.near_past_kappa;
-  near_past.tolerance = cp.near_past_tolerance;
-  near_past.min_background = cp.near_past_min_background;
-  near_past.floor = session_start_;
-  QueryResult query =
-      database_.insertAndQuery(features.descriptors, eligible, params_.search, cp.near_past ? &near_past : nullptr);
-  result.stats.query_ms = msSince(start);
-  result.stats.query = query.stats;
-  result.stats.eligible_keyframes = query.similarity.size();
-  result.stats.near_past_keyframes = query.near_past;
+  judge(result.candidates, features, maps);
+  // max_candidates is per keyframe, however many maps were asked: the best after scoring.
+  if (result.candidates.size() > max_candidates) result.candidates.resize(max_candidates);
+  if (verifier_ && !result.candidates.empty()) result.stats.verify_ms = msSince(start);
 
+  // Stored last: the query is never its own candidate, and a refusal above changes nothing.
+  start = Clock::now();
+  database_.insert(features.descriptors);
+  result.stats.query_ms += msSince(start);
   result.query_index = static_cast<KeyframeIndex>(records_.size());
   result.query_session = session_;
   records_.push_back(KeyframeRecord{result.query_id, stamp, session_, std::move(features.keypoints), features.camera});
   index_of_id_.emplace(result.query_id, result.query_index);
   next_id_ = std::max(next_id_, result.query_id + 1);
-
-  start = Clock::now();
-  const std::vector<double>& belief = filter_->update(query.similarity);
-  result.candidates = selectCandidates(belief, query.similarity, *this);
-  result.stats.filter_ms = msSince(start);
-
-  start = Clock::now();
-  judge(result.candidates, result.query_index, std::move(features.depths), *this);
-  if (verifier_ && !result.candidates.empty()) result.stats.verify_ms = msSince(start);
-  result.similarity = std::move(query.similarity);
+  result.similarity = std::move(own.query.similarity);
   return result;
 }
 
-std::vector<LoopCandidate> LoopDetector::candidatesIn(const LoopDetector& map, const std::vector<double>& belief,
-                                                      const std::vector<double>& similarity, KeyframeIndex query_index,
-                                                      std::vector<float> query_depths) const {
-  std::vector<LoopCandidate> candidates = selectCandidates(belief, similarity, map);
-  judge(candidates, query_index, std::move(query_depths), map);
-  return candidates;
-}
-
-void LoopDetector::judge(std::vector<LoopCandidate>& candidates, KeyframeIndex query_index,
-                         std::vector<float> query_depths, const LoopDetector& map) const {
+void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features& query,
+                         const std::vector<const LoopDetector*>& maps) const {
   if (verifier_ && !candidates.empty()) {
-    Features query_features = features(query_index);
-    query_features.depths = std::move(query_depths);  // only the query's are needed (PnP), so none are stored
     std::vector<Features> candidate_features;
     candidate_features.reserve(candidates.size());
-    for (const LoopCandidate& c : candidates) candidate_features.push_back(map.features(c.index));
-    std::vector<Verification> verifications = verifier_->verifyAll(query_features, candidate_features);
+    for (size_t i = 0; i < candidates.size(); ++i) candidate_features.push_back(maps[i]->features(candidates[i].index));
+    std::vector<Verification> verifications = verifier_->verifyAll(query, candidate_features);
     if (verifications.size() != candidates.size()) {
       throw std::logic_error("the candidate verifier returned " + std::to_string(verifications.size()) +
                              " verifications for " + std::to_string(candidates.size()) + " candidates");
@@ -411,26 +464,6 @@ std::vector<KeyframeIndex> separatedBest(const std::vector<double>& belief, cons
       return (taken > j ? taken - j : j - taken) <= suppression_radius;
     });
     if (!suppressed) out.push_back(j);
-  }
-  return out;
-}
-
-std::vector<LoopCandidate> LoopDetector::selectCandidates(const std::vector<double>& belief,
-                                                          const std::vector<double>& similarity,
-                                                          const LoopDetector& map) const {
-  const CandidateParams& p = params_.candidates;
-  std::vector<LoopCandidate> out;
-  for (KeyframeIndex j : separatedBest(belief, similarity, static_cast<size_t>(p.max_candidates),
-                                       static_cast<KeyframeIndex>(p.suppression_radius))) {
-    LoopCandidate c;
-    c.index = j;
-    c.id = map.records_[j].id;
-    c.session = map.records_[j].session;
-    c.stamp = map.records_[j].stamp;
-    c.filter_probability = belief[j];
-    c.probability = belief[j];
-    c.similarity = similarity[j];
-    out.push_back(c);
   }
   return out;
 }

@@ -1,10 +1,8 @@
 #include "mild_lcd/detector/robot_team.hpp"
 
-#include <chrono>
 #include <set>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/common/stopwatch.hpp"
 
 namespace mild {
 
@@ -37,48 +35,26 @@ std::optional<size_t> RobotTeam::find(const std::string& name) const {
   return std::nullopt;
 }
 
-DetectionResult RobotTeam::process(size_t robot, Features features, double stamp, std::optional<uint64_t> id) {
+std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
   if (robot >= robots_.size()) throw InvalidInput("no robot " + std::to_string(robot));
-  const std::vector<float> depths = features.depths;
-  DetectionResult result = robots_[robot]->process(std::move(features), stamp, id);
-  addOtherRobots(robot, result, depths);
-  return result;
-}
-
-DetectionResult RobotTeam::process(size_t robot, const cv::Mat& image, PixelFormat format, double stamp,
-                                   std::optional<uint64_t> id, const CameraIntrinsics& camera) {
-  if (robot >= robots_.size()) throw InvalidInput("no robot " + std::to_string(robot));
-  DetectionResult result = robots_[robot]->process(image, format, stamp, id, camera);
-  addOtherRobots(robot, result, {});
-  return result;
-}
-
-void RobotTeam::addOtherRobots(size_t robot, DetectionResult& result, const std::vector<float>& depths) {
-  result.query_robot = static_cast<uint32_t>(robot);
-  for (LoopCandidate& c : result.candidates) c.robot = static_cast<uint32_t>(robot);
-  if (robots_.size() == 1) return;
-  const LoopDetector& own = *robots_[robot];
-  const DescriptorList query = own.database().descriptors(result.query_index);
+  std::vector<OtherMap> others;
   for (size_t other = 0; other < robots_.size(); ++other) {
-    const LoopDetector& map = *robots_[other];
-    if (other == robot || map.size() == 0) continue;
-    // Another robot's keyframes are never "a moment ago": all of them, no exclusion, no band.
-    auto start = Clock::now();
-    const QueryResult q = map.database().query(query, kAllKeyframes, map.params().search);
-    result.stats.query_ms += msSince(start);
-    result.stats.query += q.stats;
-    start = Clock::now();
-    const std::vector<double>& belief = pairFilter(robot, other).update(q.similarity);
-    result.stats.filter_ms += msSince(start);
-    start = Clock::now();
-    std::vector<LoopCandidate> found = own.candidatesIn(map, belief, q.similarity, result.query_index, depths);
-    result.stats.verify_ms += msSince(start);
-    for (LoopCandidate& c : found) {
-      c.robot = static_cast<uint32_t>(other);
-      result.candidates.push_back(std::move(c));
-    }
+    if (other != robot)
+      others.push_back({robots_[other].get(), &pairFilter(robot, other), static_cast<uint32_t>(other)});
   }
-  rankCandidates(result.candidates, own.params().candidates.min_probability);
+  return others;
+}
+
+DetectionResult RobotTeam::process(Observation observation) {
+  const size_t robot = observation.robot;
+  const std::vector<OtherMap> others = otherMaps(robot);
+  LoopDetector& detector = *robots_[robot];
+  if (observation.image) {
+    return detector.process(observation.image->pixels, observation.image->format, observation.stamp, observation.id,
+                            observation.features.camera, others, static_cast<uint32_t>(robot));
+  }
+  return detector.process(std::move(observation.features), observation.stamp, observation.id, others,
+                          static_cast<uint32_t>(robot));
 }
 
 void RobotTeam::mapChanged(size_t robot) {

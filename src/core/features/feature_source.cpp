@@ -7,32 +7,33 @@
 namespace mild {
 
 const std::vector<std::string>& featureTypes() {
-  static const std::vector<std::string> types = {OrbExtractor::kName, BriskExtractor::kName, AkazeExtractor::kName};
+  static const std::vector<std::string> types = FeatureExtractors::names();
   return types;
 }
 
 int FeatureParams::extractorBytes() const {
-  if (type == BriskExtractor::kName) return BriskExtractor::kDescriptorBytes;
-  if (type == AkazeExtractor::kName) return AkazeExtractor::kDescriptorBytes;
-  return OrbExtractor::kDescriptorBytes;
+  int bytes = 0;
+  if (!FeatureExtractors::withName(type, [&](auto entry) { bytes = decltype(entry)::type::kDescriptorBytes; })) {
+    throw InvalidInput("features/type '" + type + "' names no extractor");
+  }
+  return bytes;
 }
 
 int FeatureParams::descriptorBytes() const { return descriptor_bytes > 0 ? descriptor_bytes : extractorBytes(); }
 
 void FeatureParams::validate() const {
   validateDeclared(*this);
-  orb.validate();
-  brisk.validate();
-  akaze.validate();
+  forEachSection(extractors, [](const auto& section) { section.validate(); });
 }
 
 std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const FeatureParams& params) {
   params.validate();
-  if (params.type == BriskExtractor::kName)
-    return std::make_unique<BriskExtractor>(params.brisk, params.reference_pixels);
-  if (params.type == AkazeExtractor::kName)
-    return std::make_unique<AkazeExtractor>(params.akaze, params.reference_pixels);
-  return std::make_unique<OrbExtractor>(params.orb, params.reference_pixels);
+  std::unique_ptr<FeatureExtractor> extractor;
+  FeatureExtractors::withName(params.type, [&](auto entry) {
+    using E = typename decltype(entry)::type;
+    extractor = std::make_unique<E>(params.section<typename E::Params>(), params.reference_pixels);
+  });
+  return extractor;
 }
 
 }  // namespace mild

@@ -27,6 +27,19 @@ int channelsOf(PixelFormat f) {
 
 }  // namespace
 
+std::optional<PixelFormat> decodedPixelFormat(int channels) {
+  switch (channels) {
+    case 1:
+      return PixelFormat::kGray;
+    case 3:
+      return PixelFormat::kBgr;
+    case 4:
+      return PixelFormat::kBgra;
+    default:
+      return std::nullopt;
+  }
+}
+
 void keepStrongest(std::vector<cv::KeyPoint>& keypoints, cv::Mat& descriptors, size_t limit) {
   if (keypoints.size() <= limit) return;
   std::vector<int> order(keypoints.size());

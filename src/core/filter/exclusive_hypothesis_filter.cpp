@@ -7,11 +7,24 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/filter/filter_state.hpp"
 
 namespace mild {
 
-ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const FilterParams& params)
-    : params_((params.validate(), params)) {
+void ExclusiveHypothesisParams::validate() const {
+  validateDeclared(*this);
+  double total = 0.0;
+  for (double w : motion_kernel) total += w;
+  if (!(total > 0.0)) throw InvalidInput(std::string(kSection) + "/motion_kernel needs at least one positive weight");
+}
+
+double noLoopLikelihood(const ExclusiveHypothesisParams& params, size_t eligible_keyframes) {
+  if (params.no_loop_growth == 0.0) return params.no_loop_likelihood;
+  const double ratio = static_cast<double>(eligible_keyframes) / params.no_loop_reference_keyframes;
+  return std::max(1.0, params.no_loop_likelihood * std::pow(ratio, params.no_loop_growth));
+}
+
+ExclusiveHypothesisFilter::ExclusiveHypothesisFilter(const Params& params) : params_((params.validate(), params)) {
   const double total = std::accumulate(params_.motion_kernel.begin(), params_.motion_kernel.end(), 0.0);
   for (double w : params_.motion_kernel) kernel_.push_back(w / total);
 }
@@ -36,28 +49,11 @@ void ExclusiveHypothesisFilter::setState(std::vector<double> posterior, double n
 
 // Layout: u32 count, count doubles (the posterior), one double (no loop). Native byte order, as the
 // rest of the database file.
-std::vector<uint8_t> ExclusiveHypothesisFilter::saveState() const {
-  std::vector<uint8_t> out(sizeof(uint32_t) + (posterior_.size() + 1) * sizeof(double));
-  const uint32_t n = static_cast<uint32_t>(posterior_.size());
-  std::memcpy(out.data(), &n, sizeof(n));
-  if (n > 0) std::memcpy(out.data() + sizeof(n), posterior_.data(), n * sizeof(double));
-  std::memcpy(out.data() + sizeof(n) + n * sizeof(double), &no_loop_, sizeof(double));
-  return out;
-}
+std::vector<uint8_t> ExclusiveHypothesisFilter::saveState() const { return packFilterState(posterior_, {no_loop_}); }
 
 void ExclusiveHypothesisFilter::loadState(const std::vector<uint8_t>& bytes) {
-  uint32_t n = 0;
-  if (bytes.size() < sizeof(n) + sizeof(double)) throw InvalidInput("filter state too short");
-  std::memcpy(&n, bytes.data(), sizeof(n));
-  if (bytes.size() != sizeof(n) + (static_cast<size_t>(n) + 1) * sizeof(double)) {
-    throw InvalidInput("filter state of " + std::to_string(bytes.size()) + " bytes does not hold " + std::to_string(n) +
-                       " probabilities");
-  }
-  std::vector<double> posterior(n);
-  if (n > 0) std::memcpy(posterior.data(), bytes.data() + sizeof(n), n * sizeof(double));
-  double no_loop = 0.0;
-  std::memcpy(&no_loop, bytes.data() + sizeof(n) + n * sizeof(double), sizeof(double));
-  setState(std::move(posterior), no_loop);
+  FilterStateValues state = unpackFilterState(bytes, 1);
+  setState(std::move(state.values), state.extra.front());
 }
 
 const std::vector<double>& ExclusiveHypothesisFilter::update(const std::vector<double>& similarity) {

@@ -6,10 +6,11 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/filter/filter_state.hpp"
 
 namespace mild {
 
-IndependentBinaryFilter::IndependentBinaryFilter(const FilterParams& params) : params_((params.validate(), params)) {}
+IndependentBinaryFilter::IndependentBinaryFilter(const Params& params) : params_((params.validate(), params)) {}
 
 const std::vector<double>& IndependentBinaryFilter::update(const std::vector<double>& similarity) {
   const size_t n = similarity.size();
@@ -36,24 +37,10 @@ const std::vector<double>& IndependentBinaryFilter::update(const std::vector<dou
   return probability_;
 }
 
-std::vector<uint8_t> IndependentBinaryFilter::saveState() const {
-  std::vector<uint8_t> out(sizeof(uint32_t) + probability_.size() * sizeof(double));
-  const uint32_t n = static_cast<uint32_t>(probability_.size());
-  std::memcpy(out.data(), &n, sizeof(n));
-  if (n > 0) std::memcpy(out.data() + sizeof(n), probability_.data(), n * sizeof(double));
-  return out;
-}
+std::vector<uint8_t> IndependentBinaryFilter::saveState() const { return packFilterState(probability_); }
 
 void IndependentBinaryFilter::loadState(const std::vector<uint8_t>& bytes) {
-  uint32_t n = 0;
-  if (bytes.size() < sizeof(n)) throw InvalidInput("filter state too short");
-  std::memcpy(&n, bytes.data(), sizeof(n));
-  if (bytes.size() != sizeof(n) + static_cast<size_t>(n) * sizeof(double)) {
-    throw InvalidInput("filter state of " + std::to_string(bytes.size()) + " bytes does not hold " + std::to_string(n) +
-                       " probabilities");
-  }
-  std::vector<double> p(n);
-  if (n > 0) std::memcpy(p.data(), bytes.data() + sizeof(n), n * sizeof(double));
+  std::vector<double> p = unpackFilterState(bytes, 0).values;
   for (double v : p) {
     if (!(v >= 0.0 && v <= 1.0)) throw InvalidInput("filter state holds a value outside [0, 1]");
   }

@@ -5,47 +5,30 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
-#include "mild_lcd/filter/independent_binary_filter.hpp"
+#include "mild_lcd/common/median.hpp"
+#include "mild_lcd/filter/filters.hpp"
 
 namespace mild {
 
 const std::vector<std::string>& temporalFilterTypes() {
-  static const std::vector<std::string> types = {ExclusiveHypothesisFilter::kName, IndependentBinaryFilter::kName};
+  static const std::vector<std::string> types = TemporalFilters::names();
   return types;
 }
 
 void FilterParams::validate() const {
   validateDeclared(*this);
-  double total = 0.0;
-  for (double w : motion_kernel) total += w;
-  if (!(total > 0.0)) throw InvalidInput("filter/motion_kernel needs at least one positive weight");
+  forEachSection(filters, [](const auto& section) { section.validate(); });
 }
 
 std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params) {
   params.validate();
-  if (params.type == IndependentBinaryFilter::kName) return std::make_unique<IndependentBinaryFilter>(params);
-  return std::make_unique<ExclusiveHypothesisFilter>(params);
+  std::unique_ptr<TemporalFilter> filter;
+  TemporalFilters::withName(params.type, [&](auto entry) {
+    using F = typename decltype(entry)::type;
+    filter = std::make_unique<F>(params.section<typename F::Params>());
+  });
+  return filter;
 }
-
-double noLoopLikelihood(const FilterParams& params, size_t eligible_keyframes) {
-  if (params.no_loop_growth == 0.0) return params.no_loop_likelihood;
-  const double ratio = static_cast<double>(eligible_keyframes) / params.no_loop_reference_keyframes;
-  return std::max(1.0, params.no_loop_likelihood * std::pow(ratio, params.no_loop_growth));
-}
-
-namespace {
-
-// Median with the two middle values averaged for an even count; reorders its argument.
-double median(std::vector<double>& v) {
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<long>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + static_cast<long>(mid)));
-}
-
-}  // namespace
 
 std::vector<double> robustSaliency(const std::vector<double>& similarity) {
   std::vector<double> z(similarity.size(), 0.0);

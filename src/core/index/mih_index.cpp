@@ -89,6 +89,7 @@ void MihIndex::clear() {
   merge_queue_.clear();
   entry_count_ = 0;
   discarded_buckets_ = 0;
+  evicted_entries_ = 0;
   features_seen_ = 0;
 }
 

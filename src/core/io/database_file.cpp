@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/filter/filter_state.hpp"
 #include "mild_lcd/params/parameters.hpp"
 
 namespace mild {
@@ -378,15 +379,16 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
     state.descriptors[k] = descriptorsFromBytes(descriptors, features * descriptor_bytes, state.descriptor_bytes);
   }
   if (version == 1) {
-    // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, which is
-    // that filter's state layout: u32 count, count doubles, one double.
+    // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, without
+    // the count: that filter's state (filter_state.hpp) once the count is put in front.
     const size_t posterior = in.count(sizeof(double), "the filter state size");
     const uint8_t* beliefs = in.take(posterior * sizeof(double) + sizeof(double), "the filter state");
-    const uint32_t count = static_cast<uint32_t>(posterior);
+    std::vector<double> values(posterior);
+    double no_loop = 0.0;
+    if (posterior > 0) std::memcpy(values.data(), beliefs, posterior * sizeof(double));
+    std::memcpy(&no_loop, beliefs + posterior * sizeof(double), sizeof(double));
     state.filter_name = "exclusive_hypotheses";
-    state.filter_state.resize(sizeof(count));
-    std::memcpy(state.filter_state.data(), &count, sizeof(count));
-    state.filter_state.insert(state.filter_state.end(), beliefs, beliefs + posterior * sizeof(double) + sizeof(double));
+    state.filter_state = packFilterState(values, {no_loop});
   } else {
     const size_t name = in.count(1, "the filter name");
     const uint8_t* name_chars = in.take(name, "the filter name");

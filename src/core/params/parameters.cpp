@@ -7,8 +7,6 @@
 #include <sstream>
 #include <type_traits>
 
-#include <yaml-cpp/yaml.h>
-
 #include "mild_lcd/common/errors.hpp"
 
 namespace mild {
@@ -16,22 +14,10 @@ namespace {
 
 template <class T>
 std::string toText(const T& v) {
-  if constexpr (std::is_same_v<T, std::vector<double>>) {
-    std::ostringstream out;
-    out << "[";
-    for (size_t i = 0; i < v.size(); ++i) out << (i ? ", " : "") << v[i];
-    out << "]";
-    return out.str();
-  } else if constexpr (std::is_same_v<T, bool>) {
-    return v ? "true" : "false";
-  } else if constexpr (std::is_same_v<T, SearchMode>) {
+  if constexpr (std::is_same_v<T, SearchMode>) {
     return searchModeName(v);
-  } else if constexpr (std::is_same_v<T, std::string>) {
-    return v;
   } else {
-    std::ostringstream out;
-    out << v;
-    return out.str();
+    return parameterText(v);
   }
 }
 
@@ -45,19 +31,33 @@ bool inNamespaces(const std::string& name) {
 }  // namespace
 
 const std::vector<ParameterSection>& parameterSections() {
-  static const std::vector<ParameterSection> sections = {
-      {"features", "Where a keyframe's features come from when the node is given images."},
-      {"orb", "ORB (OpenCV), features/type orb: 256-bit descriptors."},
-      {"brisk", "BRISK (OpenCV), features/type brisk: 512-bit descriptors, as OKVIS and maplab use."},
-      {"akaze", "AKAZE with its M-LDB descriptor (OpenCV), features/type akaze: 486 bits in 61 bytes."},
-      {"index", "Multi-index hashing of the stored descriptors (seed paper III.B)."},
-      {"similarity", "Image similarity by voting (seed paper III.A, III.C-E). Distances are given per 256 bits."},
-      {"filter", "The temporal filter that turns similarity into a loop probability."},
-      {"detector", "Which stored keyframes may be candidates, and how many are reported."},
-      {"verification", "Geometric verification: sparse match of query and candidate, then a two-view model."},
-      {"scoring", "The calibrated loop probability every candidate is published with."},
-  };
+  static const std::vector<ParameterSection> sections = [] {
+    std::vector<ParameterSection> out;
+    // The extension points' sections carry their own doc (kDoc); the stages' are here.
+    const auto add = [&](const auto& section) { out.push_back({section.kSection, section.kDoc}); };
+    const auto stage = [&](const auto& section, const char* doc) { out.push_back({section.kSection, doc}); };
+    const DetectorParams p;
+    add(p.features);
+    forEachSection(p.features.extractors, add);
+    stage(p.database.index, "Multi-index hashing of the stored descriptors (seed paper III.B).");
+    stage(p.database.similarity,
+          "Image similarity by voting (seed paper III.A, III.C-E). Distances are given per 256 bits.");
+    add(p.filter);
+    forEachSection(p.filter.filters, add);
+    stage(p.candidates, "Which stored keyframes may be candidates, and how many are reported.");
+    stage(p.verification, "Geometric verification: sparse match of query and candidate, then a two-view model.");
+    stage(p.scoring, "The calibrated loop probability every candidate is published with.");
+    return out;
+  }();
   return sections;
+}
+
+std::string legacyParameterName(const std::string& name) {
+  const size_t slash = name.find('/');
+  if (slash == std::string::npos) return "";
+  const auto& filters = temporalFilterTypes();
+  if (std::find(filters.begin(), filters.end(), name.substr(0, slash)) == filters.end()) return "";
+  return std::string(FilterParams::kSection) + name.substr(slash);
 }
 
 const std::vector<std::string>& detectorParameterNamespaces() {
@@ -72,18 +72,10 @@ const std::vector<std::string>& detectorParameterNamespaces() {
 DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorParams& defaults) {
   DetectorParams p = defaults;
   std::vector<std::string> known;
-  visitParameters(p, [&](const std::string& name, auto& field, const Bounds&, const char*) {
+  // Earlier names first, so that a file holding both lets the current name decide.
+  const auto read = [&](const std::string& name, auto& field) {
     using T = std::decay_t<decltype(field)>;
-    known.push_back(name);
-    if constexpr (std::is_same_v<T, bool>) {
-      if (auto v = source.getBool(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, double>) {
-      if (auto v = source.getDouble(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, std::vector<double>>) {
-      if (auto v = source.getDoubleList(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, std::string>) {
-      if (auto v = source.getString(name)) field = *v;
-    } else if constexpr (std::is_same_v<T, SearchMode>) {
+    if constexpr (std::is_same_v<T, SearchMode>) {
       if (auto v = source.getString(name)) {
         if (*v == "index")
           field = SearchMode::kIndex;
@@ -93,16 +85,17 @@ DetectorParams loadDetectorParams(const ParameterSource& source, const DetectorP
           throw InvalidInput("parameter " + name + " must be 'index' or 'exact', got '" + *v + "'");
       }
     } else {
-      static_assert(std::is_integral_v<T>);
-      if (auto v = source.getInt(name)) {
-        if (*v < static_cast<int64_t>(std::numeric_limits<T>::min()) ||
-            static_cast<uint64_t>(*v) > static_cast<uint64_t>(std::numeric_limits<T>::max()) ||
-            (std::is_unsigned_v<T> && *v < 0)) {
-          throw InvalidInput("parameter " + name + " is out of range: " + std::to_string(*v));
-        }
-        field = static_cast<T>(*v);
-      }
+      readParameter(source, name, field);
     }
+  };
+  visitParameters(p, [&](const std::string& name, auto& field, const Bounds&, const char*) {
+    const std::string legacy = legacyParameterName(name);
+    if (!legacy.empty()) {
+      known.push_back(legacy);
+      read(legacy, field);
+    }
+    known.push_back(name);
+    read(name, field);
   });
   const auto& namespaces = detectorParameterNamespaces();
   for (const std::string& name : source.names()) {
@@ -127,6 +120,20 @@ const std::vector<std::string>& runtimeParameterNames() {
     return out;
   }();
   return names;
+}
+
+void copyRuntimeParameters(const DetectorParams& from, DetectorParams& into) {
+  // Both walks visit the same fields in the same order with the same types (one template, const and
+  // not), so the i-th field of `from` is the i-th of `into`.
+  std::vector<const void*> source;
+  visitParameters(from,
+                  [&](const std::string&, const auto& field, const Bounds&, const char*) { source.push_back(&field); });
+  size_t i = 0;
+  visitParameters(into, [&](const std::string&, auto& field, const Bounds& bounds, const char*) {
+    using T = std::decay_t<decltype(field)>;
+    if (bounds.isRuntime()) field = *static_cast<const T*>(source[i]);
+    ++i;
+  });
 }
 
 std::vector<std::pair<std::string, std::string>> describeParameters(const DetectorParams& p,
@@ -179,6 +186,8 @@ std::string parameterYaml(const DetectorParams& params) {
          "#   the nodelet's private namespace       (<rosparam file=\"...\" command=\"load\"/>, e.g. "
          "~orb/num_features)\n"
          "#   your own YAML, listing only what you change.\n"
+         "# The filters' sections are named after them; their names of earlier versions, filter/<name>,\n"
+         "# still set <name> in every filter section that has it.\n"
          "# Unknown names in these sections, wrong types and values out of range stop the node at start-up\n"
          "# with a message naming the parameter. [runtime] marks what dynamic_reconfigure may change while\n"
          "# the node runs; everything else is read at start-up only. Figures quoted were measured on\n"
@@ -219,131 +228,6 @@ std::string parameterMarkdown() {
         << (bounds.isRuntime() ? "yes" : "") << " | " << meaning << " |\n";
   });
   return out.str();
-}
-
-// --- YAML ------------------------------------------------------------------------------------
-
-namespace {
-
-template <class Value>
-void flatten(const YAML::Node& node, const std::string& prefix, std::vector<std::pair<std::string, Value>>& out,
-             const std::string& origin) {
-  if (node.IsMap()) {
-    for (const auto& kv : node) {
-      const std::string key = kv.first.as<std::string>();
-      flatten(kv.second, prefix.empty() ? key : prefix + "/" + key, out, origin);
-    }
-  } else if (node.IsScalar()) {
-    out.emplace_back(prefix, Value{false, {node.Scalar()}});
-  } else if (node.IsSequence()) {
-    Value list{true, {}};
-    for (const auto& item : node) {
-      if (!item.IsScalar()) throw InvalidInput(origin + ": parameter '" + prefix + "' must be a list of numbers");
-      list.items.push_back(item.Scalar());
-    }
-    out.emplace_back(prefix, list);
-  }
-  // a null node (an empty section such as "filter:") sets nothing
-}
-
-std::optional<double> parseDouble(const std::string& text) {
-  try {
-    size_t used = 0;
-    const double v = std::stod(text, &used);
-    if (used == text.size()) return v;
-  } catch (const std::exception&) {
-  }
-  return std::nullopt;
-}
-
-}  // namespace
-
-YamlParameterSource YamlParameterSource::fromString(const std::string& yaml, const std::string& origin) {
-  YamlParameterSource source;
-  source.origin_ = origin;
-  try {
-    const YAML::Node root = YAML::Load(yaml);
-    if (!root.IsNull() && !root.IsMap()) throw InvalidInput(origin + ": expected a map of parameters at the top level");
-    flatten(root, "", source.values_, origin);
-  } catch (const YAML::Exception& e) {
-    throw InvalidInput(origin + ": not valid YAML: " + e.what());
-  }
-  return source;
-}
-
-YamlParameterSource YamlParameterSource::fromFile(const std::string& path) {
-  std::error_code error;
-  if (!std::filesystem::is_regular_file(path, error)) {
-    throw InvalidInput(path + ": not a parameter file (missing, or not a regular file)");
-  }
-  std::ifstream in(path);
-  if (!in) throw InvalidInput(path + ": cannot read the file");
-  std::ostringstream text;
-  text << in.rdbuf();
-  return fromString(text.str(), path);
-}
-
-const YamlParameterSource::Value* YamlParameterSource::find(const std::string& name) const {
-  for (const auto& [key, value] : values_) {
-    if (key == name) return &value;
-  }
-  return nullptr;
-}
-
-std::optional<std::string> YamlParameterSource::scalar(const std::string& name) const {
-  const Value* v = find(name);
-  if (v == nullptr) return std::nullopt;
-  if (v->is_list) throw InvalidInput(origin_ + ": parameter " + name + " must be a single value, not a list");
-  return v->items.front();
-}
-
-std::optional<double> YamlParameterSource::getDouble(const std::string& name) const {
-  auto text = scalar(name);
-  if (!text) return std::nullopt;
-  if (auto v = parseDouble(*text)) return v;
-  throw InvalidInput(origin_ + ": parameter " + name + " must be a number, got '" + *text + "'");
-}
-
-std::optional<std::vector<double>> YamlParameterSource::getDoubleList(const std::string& name) const {
-  const Value* v = find(name);
-  if (v == nullptr) return std::nullopt;
-  if (!v->is_list)
-    throw InvalidInput(origin_ + ": parameter " + name + " must be a list of numbers, such as [0.3, 1.0]");
-  std::vector<double> out;
-  for (const std::string& item : v->items) {
-    auto d = parseDouble(item);
-    if (!d) throw InvalidInput(origin_ + ": parameter " + name + " must be a list of numbers, got item '" + item + "'");
-    out.push_back(*d);
-  }
-  return out;
-}
-
-std::optional<int64_t> YamlParameterSource::getInt(const std::string& name) const {
-  auto text = scalar(name);
-  if (!text) return std::nullopt;
-  try {
-    size_t used = 0;
-    const long long v = std::stoll(*text, &used);
-    if (used == text->size()) return v;
-  } catch (const std::exception&) {
-  }
-  throw InvalidInput(origin_ + ": parameter " + name + " must be an integer, got '" + *text + "'");
-}
-
-std::optional<bool> YamlParameterSource::getBool(const std::string& name) const {
-  auto text = scalar(name);
-  if (!text) return std::nullopt;
-  if (*text == "true" || *text == "True" || *text == "TRUE") return true;
-  if (*text == "false" || *text == "False" || *text == "FALSE") return false;
-  throw InvalidInput(origin_ + ": parameter " + name + " must be true or false, got '" + *text + "'");
-}
-
-std::optional<std::string> YamlParameterSource::getString(const std::string& name) const { return scalar(name); }
-
-std::vector<std::string> YamlParameterSource::names() const {
-  std::vector<std::string> out;
-  for (const auto& kv : values_) out.push_back(kv.first);
-  return out;
 }
 
 }  // namespace mild

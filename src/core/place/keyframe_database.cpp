@@ -118,12 +118,17 @@ KeyframeIndex KeyframeDatabase::insert(const cv::Mat& descriptors) {
   return insert(descriptorsFromMat(descriptors, params_.descriptor_bytes));
 }
 
-KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
+void KeyframeDatabase::checkRoomFor(const DescriptorList& descriptors) const {
   checkDescriptorWidth(descriptors, params_.descriptor_bytes, "keyframe");
   const uint64_t total = static_cast<uint64_t>(featureCount()) + descriptors.size();
   if (total >= std::numeric_limits<FeatureId>::max() || size() + 1 >= kAllKeyframes) {
-    throw InvalidInput("keyframe database is full (2^32 features or keyframes)");
+    throw CapacityError("keyframe database is full (2^32 features or keyframes)");
   }
+}
+
+KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
+  checkRoomFor(descriptors);
+  const uint64_t total = static_cast<uint64_t>(featureCount()) + descriptors.size();
   const KeyframeIndex k = static_cast<KeyframeIndex>(size());
   const FeatureId first = static_cast<FeatureId>(featureCount());
   if (total > heads_.capacity()) {
@@ -200,43 +205,6 @@ DescriptorList KeyframeDatabase::descriptors(KeyframeIndex k) const {
 QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_limit, SearchMode mode) const {
   return query(descriptorsFromMat(q, params_.descriptor_bytes), candidate_limit, mode, nullptr);
 }
-
-namespace {
-
-double medianOf(std::vector<double>& v) {
-  const size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<long>(mid), v.end());
-  return v[mid];
-}
-
-// The near-past band (NearPastRule) from matched[k]: query features with a match in keyframe k,
-// for k < limit.
-KeyframeIndex nearPastBand(const std::vector<uint32_t>& matched, KeyframeIndex limit, const NearPastRule& rule) {
-  const KeyframeIndex floor = std::min(rule.floor, limit);
-  const KeyframeIndex session = limit - floor;
-  if (session == 0) return 0;
-  // The background may include earlier sessions: they show elsewhere as well as anything does.
-  if (limit < static_cast<KeyframeIndex>(rule.min_background)) return session;
-  const KeyframeIndex window = std::min<KeyframeIndex>(limit, static_cast<KeyframeIndex>(std::max(1, rule.background)));
-  std::vector<double> level(window);
-  for (KeyframeIndex i = 0; i < window; ++i) level[i] = matched[limit - 1 - i];
-  const double centre = medianOf(level);
-  for (double& v : level) v = std::abs(v - centre);
-  const double threshold = centre + rule.kappa * 1.4826 * medianOf(level);
-  KeyframeIndex band = 0;
-  int below = 0;
-  for (KeyframeIndex k = limit; k-- > floor;) {
-    if (matched[k] > threshold) {
-      band = limit - k;
-      below = 0;
-    } else if (++below > rule.tolerance) {
-      break;
-    }
-  }
-  return band;
-}
-
-}  // namespace
 
 template <int kTailWords>
 void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch,

@@ -5,7 +5,7 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/place/similarity.hpp"
+#include "mild_lcd/features/descriptor.hpp"
 
 namespace mild {
 void SparseMatchParams::validate() const {

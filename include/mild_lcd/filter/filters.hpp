@@ -1,0 +1,51 @@
+#pragma once
+
+// The temporal filters filter/type can name: one entry each. An entry is a TemporalFilter with
+// kName (recorded in database files), Params (its parameter section, declared beside it and named
+// after it: exclusive_hypotheses/, independent_binary/) and a constructor (const Params&).
+// Adding a filter: its file, its entry here, CMake, its test.
+
+#include <memory>
+#include <string>
+#include <tuple>
+
+#include "mild_lcd/common/registry.hpp"
+#include "mild_lcd/filter/exclusive_hypothesis_filter.hpp"
+#include "mild_lcd/filter/independent_binary_filter.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
+
+namespace mild {
+
+using TemporalFilters = Registry<ExclusiveHypothesisFilter, IndependentBinaryFilter>;
+
+// Which filter runs (filter/type) and every filter's own section (`filters`: one per entry).
+struct FilterParams {
+  std::string type = ExclusiveHypothesisFilter::kName;
+  TemporalFilters::Sections filters;
+
+  static constexpr const char* kSection = "filter";
+  static constexpr const char* kDoc = "The temporal filter that turns similarity into a loop probability.";
+  template <class Self, class Visit>
+  static void declare(Self& p, Visit&& v) {
+    v("type", p.type, Bounds::oneOf(temporalFilterTypes()),
+      "The temporal filter, one of the sections below, each with the parameters it reads. A saved run is only "
+      "resumed by the filter type that wrote it.");
+  }
+
+  // A filter's section, e.g. section<ExclusiveHypothesisParams>().loop_onset.
+  template <class S>
+  S& section() {
+    return std::get<S>(filters);
+  }
+  template <class S>
+  const S& section() const {
+    return std::get<S>(filters);
+  }
+  void validate() const;  // throws InvalidInput naming the first invalid field
+};
+
+// The filter params.type names, with its section's parameters; throws InvalidInput for an unknown
+// type or invalid parameters.
+std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params);
+
+}  // namespace mild
