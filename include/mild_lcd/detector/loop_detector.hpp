@@ -249,6 +249,11 @@ class LoopDetector {
   // Local maxima of `belief` over map's keyframes, best first (this detector's or another's).
   std::vector<LoopCandidate> selectCandidates(const std::vector<double>& belief, const std::vector<double>& similarity,
                                               const LoopDetector& map) const;
+  // Whether fitting candidate i (with `matches` descriptor matches) can change what is reported:
+  // false when even `matches` inliers would leave it below the decision probability and below a
+  // candidate already verified (verification/early_stop).
+  bool fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
+                    const std::vector<Verification>& earlier) const;
   // Verifies (when verifying), scores, judges and ranks candidates in `map` for keyframe query_index.
   void judge(std::vector<LoopCandidate>& candidates, KeyframeIndex query_index, std::vector<float> query_depths,
              const LoopDetector& map) const;
