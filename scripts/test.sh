@@ -1,6 +1,7 @@
 #!/bin/bash
 # Installs missing Debian packages, builds mild_lcd in .build/, runs every gtest and rostest, then
-# each libFuzzer target for FUZZ_SECONDS (30), then the static checks (scripts/lint.sh: catkin_lint,
+# the downstream package (test/downstream_pkg, against the devel space), each libFuzzer target for
+# FUZZ_SECONDS (30), then the static checks (scripts/lint.sh: catkin_lint,
 # clang-format), and prints `N passed, N failed` as its last line.
 # Exits non-zero when anything failed or did not build.
 #   ./scripts/test.sh                                   # everything
@@ -56,6 +57,10 @@ if [[ "${MILD_SANITIZE:-}" == *thread* ]]; then
 else
   # run_tests exits 0 even when tests fail (ros-recipe gotcha 6): the verdict comes from the results.
   cmake --build "$BUILD_DIR" --target run_tests -j 1 || true
+fi
+if [[ -z "${MILD_SANITIZE:-}" ]]; then
+  # A package of someone else's, built against the devel space (find_package(catkin COMPONENTS mild_lcd)).
+  "$REPO/scripts/check_downstream.sh" || echo "[mild_lcd] the downstream package failed" >&2
 fi
 if [[ "${FUZZ_SECONDS:-30}" -gt 0 ]]; then
   FUZZ_SECONDS="${FUZZ_SECONDS:-30}" "$REPO/scripts/fuzz.sh" || echo "[mild_lcd] a fuzz target failed" >&2

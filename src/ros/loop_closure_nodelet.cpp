@@ -14,6 +14,7 @@
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
+#include <boost/make_shared.hpp>
 #include <pluginlib/class_list_macros.hpp>
 
 #include "detector_diagnostics.hpp"
@@ -198,8 +199,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   // Runs on the worker thread, without the detector lock.
   void publish(const ProcessedKeyframe& k) {
     const uint32_t robot = k.result.query_robot;
-    const mild_lcd::LoopClosure msg =
-        loopClosureToMsg(k.result, k.header, k.database_size, settings_.publish_correspondences, team_names_);
+    // A shared pointer, never changed after publishing: a subscriber in the same manager (the
+    // pose-graph nodelet) receives it without serialisation.
+    const mild_lcd::LoopClosure::ConstPtr msg = boost::make_shared<const mild_lcd::LoopClosure>(
+        loopClosureToMsg(k.result, k.header, k.database_size, settings_.publish_correspondences, team_names_));
     robots_.at(robot)->loop_pub.publish(msg);
     if (all_pub_) all_pub_.publish(msg);
     if (!k.image.image.empty()) debug_cache_->remember(k.result.query_id, k.image.image, k.image.format, robot);

@@ -3,7 +3,10 @@
 // Keyframe messages with features computed by mild_lcd's extractors (the `keyframe` input; ORB
 // by default, --features brisk or akaze for other descriptor widths).
 // Time stamps come from times.txt (or the frame rate) plus a start offset. With --camera, also
-// camera_info beside the images and the intrinsics in each Keyframe.
+// camera_info beside the images and the intrinsics in each Keyframe. With --odometry-from POSES
+// (the bench's poses.txt), also odometry with drift (backend/trajectory.hpp's model): nav_msgs/Odometry
+// on /odom and tf odom -> base_link at each frame's stamp, and the camera's mounting as static tf
+// base_link -> the images' frame (a forward-looking camera at the base's origin, as the bench's).
 
 #include <fstream>
 #include <iostream>
@@ -13,19 +16,43 @@
 
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/camera_common.h>
+#include <nav_msgs/Odometry.h>
 #include <ros/time.h>
 #include <rosbag/bag.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/image_encodings.h>
+#include <tf2_msgs/TFMessage.h>
+#include <Eigen/Geometry>
+#include <boost/make_shared.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
 #include "mild_lcd/Keyframe.h"
+#include "mild_lcd/backend/pose_graph.hpp"
+#include "mild_lcd/backend/trajectory.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/features/feature_source.hpp"
+#include "mild_lcd/offline/pose_evaluation.hpp"
 #include "mild_lcd/ros/conversions.hpp"
+
+namespace {
+
+geometry_msgs::Quaternion quaternion(const Eigen::Quaterniond& q) {
+  geometry_msgs::Quaternion m;
+  m.w = q.w();
+  m.x = q.x();
+  m.y = q.y();
+  m.z = q.z();
+  return m;
+}
+
+geometry_msgs::Quaternion yawQuaternion(double yaw) {
+  return quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ())));
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"Write an image sequence into a rosbag (raw, compressed and keyframe topics)."};
@@ -41,6 +68,8 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "bag file to write")->required();
   app.add_option("--image-topic", image_topic, "raw images; compressed ones go to <topic>/compressed");
   app.add_flag("--no-images", no_images, "write no images, only Keyframes");
+  bool no_keyframes = false;
+  app.add_flag("--no-keyframes", no_keyframes, "write no Keyframe messages");
   app.add_option("--frames", range, "FIRST LAST: only frames FIRST..LAST-1 (ids and stamps stay the frames' own)")
       ->expected(2);
   app.add_option("--keyframe-topic", keyframe_topic, "mild_lcd/Keyframe messages");
@@ -52,11 +81,24 @@ int main(int argc, char** argv) {
                  "fx fy cx cy: write sensor_msgs/CameraInfo beside the images (image_transport's camera_info) "
                  "and into each Keyframe")
       ->expected(4);
+  std::string odometry_from, odom_topic = "/odom", odom_frame = "odom", base_frame = "base_link";
+  mild::backend::DriftModel drift;
+  app.add_option("--odometry-from", odometry_from,
+                 "poses.txt of the sequence (x y yaw per frame): write odometry with drift on --odom-topic, tf odom -> "
+                 "base_link, and static tf base_link -> --frame-id");
+  app.add_option("--odom-topic", odom_topic, "nav_msgs/Odometry topic")->capture_default_str();
+  app.add_option("--drift-seed", drift.seed, "seed of the odometry's drift")->capture_default_str();
+  app.add_option("--scale-error", drift.scale_error, "odometry scale error")->capture_default_str();
+  app.add_option("--translation-noise", drift.translation_noise, "translation noise per metre")->capture_default_str();
+  app.add_option("--heading-bias", drift.heading_bias, "heading bias, rad per metre")->capture_default_str();
+  app.add_option("--heading-random-walk", drift.heading_random_walk, "heading random walk, rad per sqrt(m)")
+      ->capture_default_str();
   app.add_option("--features", features, "extractor of the Keyframe messages: orb, brisk or akaze")
       ->capture_default_str();
   return mild::tools::toolMain(app, argc, argv, [&] {
     ros::Time::init();
     if (no_images) image_topic.clear();
+    if (no_keyframes) keyframe_topic.clear();
     const mild::tools::ImageSequence seq = mild::tools::openImageSequence(images, fps);
     mild::FeatureParams feature_params;
     feature_params.type = features;
@@ -75,7 +117,53 @@ int main(int argc, char** argv) {
     const size_t last = range.empty() ? seq.frames.size() : std::min(range[1], seq.frames.size());
     if (first >= last)
       throw mild::InvalidInput("--frames: no frame in " + std::to_string(first) + ".." + std::to_string(last));
+    std::vector<mild::backend::Pose2> odometry;
+    if (!odometry_from.empty()) {
+      std::vector<mild::backend::Pose2> truth;
+      for (const auto& p : mild::loadPlanarPoses(odometry_from, static_cast<long>(seq.frames.size()))) {
+        truth.push_back({p.x, p.y, p.yaw});
+      }
+      odometry = mild::backend::driftedOdometry(truth, drift);
+      // The camera's mounting, once, as a static transform.
+      const mild::backend::Extrinsics e = mild::backend::Extrinsics::forwardLooking();
+      geometry_msgs::TransformStamped mount;
+      mount.header.stamp = ros::Time(start + seq.stamps[first]);
+      mount.header.frame_id = base_frame;
+      mount.child_frame_id = frame_id;
+      mount.transform.rotation = quaternion(Eigen::Quaterniond(e.rotation));
+      tf2_msgs::TFMessage statics;
+      statics.transforms.push_back(mount);
+      // Latched, as tf2's static broadcaster publishes it: rosbag play then latches it too.
+      auto latched = boost::make_shared<ros::M_string>();
+      (*latched)["callerid"] = "/mild_make_bag";
+      (*latched)["latching"] = "1";
+      // A given connection header is written as it is: it must carry the type too.
+      (*latched)["type"] = ros::message_traits::datatype<tf2_msgs::TFMessage>();
+      (*latched)["md5sum"] = ros::message_traits::md5sum<tf2_msgs::TFMessage>();
+      (*latched)["message_definition"] = ros::message_traits::definition<tf2_msgs::TFMessage>();
+      bag.write("/tf_static", mount.header.stamp, statics, latched);
+    }
     for (size_t i = first; i < last; ++i) {
+      if (!odometry.empty()) {  // before the frame, as a robot's odometry runs ahead of its keyframes
+        nav_msgs::Odometry odom;
+        odom.header.stamp = ros::Time(start + seq.stamps[i]);
+        odom.header.seq = static_cast<uint32_t>(i);
+        odom.header.frame_id = odom_frame;
+        odom.child_frame_id = base_frame;
+        odom.pose.pose.position.x = odometry[i].x;
+        odom.pose.pose.position.y = odometry[i].y;
+        odom.pose.pose.orientation = yawQuaternion(odometry[i].yaw);
+        bag.write(odom_topic, odom.header.stamp, odom);
+        geometry_msgs::TransformStamped t;
+        t.header = odom.header;
+        t.child_frame_id = base_frame;
+        t.transform.translation.x = odometry[i].x;
+        t.transform.translation.y = odometry[i].y;
+        t.transform.rotation = odom.pose.pose.orientation;
+        tf2_msgs::TFMessage tf;
+        tf.transforms.push_back(t);
+        bag.write("/tf", odom.header.stamp, tf);
+      }
       const cv::Mat image = cv::imread(seq.frames[i], cv::IMREAD_GRAYSCALE);
       if (image.empty()) throw mild::InvalidInput(seq.frames[i] + ": cannot read the image");
       std_msgs::Header header;

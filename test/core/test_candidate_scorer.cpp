@@ -38,7 +38,7 @@ TEST(CandidateScorer, GrowsWithTheFilterProbabilityAndTheInliers) {
   const CandidateScorer scorer{ScoringParams{}};  // the fitted defaults
   EXPECT_LT(scorer.probability(0.001, checked(40, true)), scorer.probability(0.1, checked(40, true)));
   EXPECT_LT(scorer.probability(0.1, checked(20, true)), scorer.probability(0.1, checked(80, true)));
-  // The defaults mean what the README says: a strong verified revisit is a loop; a candidate with
+  // The defaults mean what the README and docs/accuracy.md say: a strong verified revisit is a loop; a candidate with
   // the inliers chance gives a fundamental matrix (11-12 at the median) and a weak filter is
   // unlikely to be one, though not impossible (real revisits that verification misses).
   EXPECT_GT(scorer.probability(0.5, checked(60, true)), 0.9);

@@ -247,7 +247,7 @@ TEST(TemporalFilters, AWeakButConsistentRevisitAccumulatesProbability) {
   // A ridge of strength 7 over noise of robust scale 0.37: a robust z of about 19, a third of a
   // daylight revisit's, held for 25 keyframes (a night lap over a place seen by day). Weaker ones,
   // near the no-loop likelihood (z about 8), do not accumulate: lowering it to let them cost more
-  // on aliased scenes than it gained on dark ones (README "Accuracy").
+  // on aliased scenes than it gained on dark ones (docs/accuracy.md).
   Stream s;
   s.revisit_start = 300;
   s.revisit_end = 325;

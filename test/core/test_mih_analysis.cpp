@@ -108,7 +108,7 @@ TEST(MihAnalysis, PaperCandidatesAndTheAdvisor) {
   const auto smallest = smallestTablesReaching(grid, 0.8);
   ASSERT_EQ(smallest.size(), 3u);
   // The paper reads (15, 0), (10, 1), (8, 2) off its figure; with 10 and 20 as standard deviations
-  // R(1, 10) = 0.799, a hair under 0.8, so r = 1 needs 11 tables (README, "MIH analysis").
+  // R(1, 10) = 0.799, a hair under 0.8, so r = 1 needs 11 tables (docs/mih_analysis.md).
   EXPECT_EQ(smallest[0].m, 15);
   EXPECT_EQ(smallest[1].m, 11);
   EXPECT_NEAR(analyse(1, 10, paperInlierPrior(), paperOutlierPrior(), BitModel::kPaper).accuracy, 0.8, 0.002);

@@ -200,7 +200,7 @@ TEST(PlanarGroundTruth, MalformedPoseFilesAreClearErrors) {
 TEST(RelativePose, OnRenderedLoopPairsOfTheSampleMatchesTheirPoses) {
   // True loop pairs of the embedded sample (second lap against the first), rendered with the bench
   // camera: the estimated rotation and baseline direction against poses.txt. On pub_corridor the
-  // medians are 2.6 and 8 degrees (README); the bounds leave room, not a different convention.
+  // medians are 2.6 and 8 degrees (docs/design.md); the bounds leave room, not a different convention.
   const std::string root = std::string(MILD_SOURCE_DIR) + "/sample/corridor";
   const mild::GroundTruth truth = mild::loadGroundTruth(root + "/gt_loops.txt", 300);
   const std::vector<PlanarPose> poses = mild::loadPlanarPoses(root + "/poses.txt", 300);

@@ -89,7 +89,7 @@ class CameraInfo : public ::testing::Test {
     ASSERT_GE(rotation.size(), 3u) << "too few verified true loops to judge the poses";
     std::sort(rotation.begin(), rotation.end());
     std::sort(direction.begin(), direction.end());
-    // On pub_corridor the medians are 2-3 degrees of rotation (README "Relative pose"); a wrong
+    // On pub_corridor the medians are 2-3 degrees of rotation (docs/design.md, "Relative pose"); a wrong
     // frame convention or the wrong camera gives tens of degrees.
     EXPECT_LT(rotation[rotation.size() / 2], 8.0);
     EXPECT_LT(direction[direction.size() / 2], 45.0);

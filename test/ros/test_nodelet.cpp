@@ -465,7 +465,7 @@ TEST(Interface, RosmsgAndRossrvShowThePackagesDefinitions) {
 
 // The launch files load the nodelet without a bond by default: with one, a nodelet manager given
 // Ctrl-C 0.2-0.75 s after roslaunch started it aborted in nodelet's own bond teardown
-// (ros/nodelet_core#99) in 11 of 20 runs; without, in 0 of 20 (README, Robustness).
+// (ros/nodelet_core#99) in 11 of 20 runs; without, in 0 of 20 (docs/robustness.md).
 TEST(LaunchFiles, LoadTheNodeletWithoutABondByDefault) {
   for (const std::string launch : {"mild_lcd.launch", "mild_lcd_nodelet.launch manager:=/m",
                                    "mild_lcd_robots.launch robots:=r1", "replay.launch bag:=b"}) {

@@ -2,12 +2,12 @@
 
 // The loop probability a candidate is published with: the temporal filter's probability and the
 // geometric verification's evidence, combined by a logistic model whose weights were fitted on
-// sequences with ground truth, rendered and real (scripts/fit_scoring.py; README "Accuracy" says on
+// sequences with ground truth, rendered and real (scripts/fit_scoring.py; docs/accuracy.md says on
 // which, and how it was cross-validated). Only evidence that means the same on real camera frames
 // as on the renders enters it: the inlier count of a wrong candidate (the chance agreement of
 // matches with a fundamental matrix) is 11-12 at the median on both, while the inlier ratio, the
 // inlier coverage and the share one plane explains differ between a world of planar walls and a
-// real one (README "Accuracy" measures each). Fitted by maximum likelihood, so that among candidates given probability
+// real one (docs/accuracy.md measures each). Fitted by maximum likelihood, so that among candidates given probability
 // p about a fraction p is right on sequences like the training ones: one threshold (0.5, "more
 // likely a loop than not") for every scene, rather than a filter posterior whose scale depends on
 // the scene.
@@ -39,7 +39,7 @@ struct ScoringParams {
       "so that the probability ranks every candidate; only verified ones can be accepted. Off (or verification "
       "off) gives the filter's probability as it is.");
     v("weights", p.weights, Bounds::list(kFeatures, kFeatures, Bounds::any()),
-      "Fitted by scripts/fit_scoring.py on the sequences the README names, real frames included "
+      "Fitted by scripts/fit_scoring.py on the sequences docs/accuracy.md names, real frames included "
       "(leave-one-kind-out cross-validated).");
     v("bias", p.bias, Bounds::any(), "The model's intercept.");
     v("filter_type", p.filter_type, Bounds::oneOf(temporalFilterTypes()),

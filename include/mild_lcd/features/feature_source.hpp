@@ -40,7 +40,7 @@ struct FeatureParams {
       "The extractor's num_features is meant for images of this many pixels (320 x 240); other sizes keep "
       "num_features x sqrt(pixels / reference_pixels), at most 4 x num_features: 1,386 of ORB's 800 on 640 x "
       "360, 1,600 on 640 x 480. On real 640 x 360 frames 800 features found a true candidate among the best "
-      "three for 80 of 100 queries and 1,500 for 87 (README \"Accuracy\"). 0 = num_features at any size.");
+      "three for 80 of 100 queries and 1,500 for 87 (docs/accuracy.md). 0 = num_features at any size.");
   }
 
   int extractorBytes() const;   // the width `type` extracts

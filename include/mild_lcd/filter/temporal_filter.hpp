@@ -48,7 +48,7 @@ struct FilterParams {
     v("no_loop_growth", p.no_loop_growth, Bounds::in(0, 2),
       "The no-loop likelihood grows as (eligible keyframes / no_loop_reference_keyframes)^no_loop_growth (never "
       "below 1): the largest saliency among keyframes of no loop grows with their number, from about 3 at 50 "
-      "keyframes to 11-13 at 1,000 on every kind of the bench, real frames included (README \"Accuracy\"). 0 = a "
+      "keyframes to 11-13 at 1,000 on every kind of the bench, real frames included (docs/accuracy.md). 0 = a "
       "constant no_loop_likelihood, the earlier design.");
     v("no_loop_reference_keyframes", p.no_loop_reference_keyframes, Bounds::above(0),
       "Eligible keyframes at which the no-loop likelihood is no_loop_likelihood.");

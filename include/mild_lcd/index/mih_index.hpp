@@ -48,17 +48,17 @@ struct MihParams {
       "Bounded query time for large maps (0 = off): a bucket keeps only its newest max_bucket_entries entries, "
       "so a query reads at most about m * max_bucket_entries ids per feature however large the map grows; old "
       "places stay findable through their rare substrings. A bucket at the bound is trimmed instead of discarded "
-      "by the cap above. README \"Beyond linear growth\" measures recall and time with and without it.");
+      "by the cap above. docs/speed.md, \"Beyond linear growth\", measures recall and time with and without it.");
     v("max_candidates_per_feature", p.max_candidates_per_feature, Bounds::atLeast(1).orZero(),
       "Query budget (0 = off): a query feature reads its buckets shortest first, and stops after this many "
       "entries per 16 tables (scaled by m / 16: 1,024 for BRISK's 32 tables); the last bucket it reaches "
       "contributes its newest entries. Distinctive substrings, which identify old places, are read whole; the cost "
-      "per query feature stops growing with the map once its common buckets fill. README \"Query budget\" "
+      "per query feature stops growing with the map once its common buckets fill. docs/speed.md, \"Query budget\", "
       "measures recall and time.");
     v("inline_prefixes", p.inline_prefixes, Bounds::any(),
       "Each index entry also holds its feature's first 64 bits, so that early termination reads each bucket "
       "sequentially instead of one random read per candidate: the same results, 8 bytes more per entry (about 128 "
-      "per stored feature with 16 tables). README \"Speed\" measures the trade.");
+      "per stored feature with 16 tables). docs/speed.md measures the trade.");
   }
   static constexpr int kAutoSubstringBits = 16;
   // The table count for descriptors of `bits` bits: num_tables, or the automatic choice.
@@ -90,7 +90,7 @@ struct ProbeCounters {
 // vector of its own. A merge shifts the runs within the array (which grows by remapping, a 64th at
 // a time), so that it neither allocates nor clears a new array of every entry. Shards due for a
 // merge wait in a queue, and an insertion merges from it within a budget (at least one shard, and
-// beyond the budget while more than 64 wait): no insertion moves a whole table (README "Insert
+// beyond the budget while more than 64 wait): no insertion moves a whole table (docs/speed.md, "Insert
 // time", "Room after each run", "Bounded insert time").
 class MihIndex {
  public:
@@ -161,13 +161,13 @@ class MihIndex {
     uint32_t count;
   };
   // One range of a table's buckets with arrays of its own, so that a merge moves one shard's
-  // entries, not the table's (README "Bounded insert time").
+  // entries, not the table's (docs/speed.md, "Insert time").
   struct Shard {
     std::unordered_map<uint64_t, uint32_t> slot_of;  // substring value -> slot (long substrings)
     std::vector<Slot> slots;                         // one per bucket, plus an end sentinel
     // 4 KB pages: a shard's array is a few megabytes at most (bounded buckets), and rounding each of
     // 1,024 of them up to 2 MB pages costs memory (16 shards with huge pages: +17 bytes per feature at
-    // 10,000 keyframes; README "Bounded insert time").
+    // 10,000 keyframes; docs/speed.md, "Insert time").
     MappedArray<FeatureId, false> ids;      // settled entries, bucket after bucket
     MappedArray<uint64_t, false> prefixes;  // beside ids (inline_prefixes), else empty
     std::vector<Link> recent;
@@ -229,7 +229,7 @@ class MihIndex {
   StampedSet seen_;
   std::vector<uint64_t> keys_;  // the keyframe's substrings for the table at hand
   // merge()'s per-bucket counts, kept between merges: allocated anew, five arrays of 65,536 counts
-  // were faulted in (and zeroed) for every merge (README "Insert time" measures the difference).
+  // were faulted in (and zeroed) for every merge (docs/speed.md, "Insert time", measures the difference).
   struct MergeScratch {
     std::vector<uint32_t> start, recent_in, from, kept, skip_recent;
   };

@@ -37,7 +37,7 @@ struct VerificationParams {
       "candidate, then a two-view model fitted robustly (verification/method). Candidates that fail it are still reported (verified "
       "= false), with the low probability their few inliers give (scoring/); only verified ones are accepted. "
       "Its inlier count is the published probability's evidence that means the same on real frames as on "
-      "renders (README \"Accuracy\").");
+      "renders (docs/accuracy.md).");
     SparseMatchParams::declare(p.matching, v);
     v("method", p.method, Bounds::oneOf(robustMethods()),
       "Model fit: OpenCV's robust estimator. usac_fast (USAC_FAST: RANSAC with few local-optimisation steps), "
@@ -65,7 +65,7 @@ struct VerificationParams {
       "Verify one keyframe's candidates concurrently, on OpenCV's worker threads (cv::getNumThreads(): the cores, "
       "unless the process set fewer). The same results either way; on two cores three candidates take about 0.7 "
       "of the time, but in the soak at 30 Hz on two cores the node dropped keyframes with it and none without it, "
-      "so it is off by default (README \"Verification on two cores\").");
+      "so it is off by default (docs/speed.md, \"Verification on two cores\").");
     v("early_stop", p.early_stop, Bounds::any(),
       "Fit a candidate's model only when it could matter: after its descriptor matches, a candidate whose "
       "published probability stays below scoring/decision_probability even if every match were an inlier, and "

@@ -183,7 +183,7 @@ std::string parameterYaml(const DetectorParams& params) {
          "# with a message naming the parameter. [runtime] marks what dynamic_reconfigure may change while\n"
          "# the node runs; everything else is read at start-up only. Figures quoted were measured on\n"
          "# ../shared/bench; the filter, near-past and scoring values were chosen by leave-one-kind-out\n"
-         "# cross-validation (README.md \"Accuracy\"), one configuration for every scene.\n";
+         "# cross-validation (docs/accuracy.md), one configuration for every scene.\n";
   std::string section;
   visitParameters(params, [&](const std::string& name, const auto& field, const Bounds& bounds, const char* doc) {
     const size_t slash = name.find('/');
