@@ -65,7 +65,7 @@ config=()
 [[ -n "${CONFIG:-}" ]] && config=(--config "$CONFIG")
 run_one() {  # name=folder
   local name=${1%%=*} dir=${1#*=}
-  "$BIN/mild_offline" --images "$dir" "${config[@]}" --output "$OUT/$name.csv" --details "$OUT/$name.details.csv" \
+  "$BIN/mild_offline" --images "$dir" "${config[@]}" --output "$OUT/$name.csv" --details "$OUT/$name.details.csv" --fit-every-candidate \
     --stats "$OUT/$name.json" >"$OUT/$name.log" 2>&1 || { echo "[mild_lcd] mild_offline failed on $name (see $OUT/$name.log)" >&2; return 1; }
 }
 export -f run_one

@@ -63,6 +63,9 @@ def load_run(spec, min_gap=40):
             sys.exit(f"{details}: no x_* feature columns (written by mild_offline --details)")
         for line in f:
             row = dict(zip(header, line.strip().split(",")))
+            if row.get("fit_skipped") == "1":
+                sys.exit(f"{details}: candidates without a fitted model (verification/early_stop): "
+                         "write the details with mild_offline --fit-every-candidate")
             i, j = int(row["query"]), int(row["candidate"])
             if i - j < min_gap:
                 continue

@@ -302,6 +302,7 @@ mild_lcd::LoopClosure loopClosureToMsg(const mild::DetectionResult& result, cons
     m.inliers = c.verification.inliers;
     m.matches = c.verification.matches;
     m.inlier_ratio = c.verification.inlier_ratio;
+    m.fit_skipped = c.verification.fit_skipped;
     m.coverage = c.verification.coverage;
     m.homography_share = c.verification.homography_share;
     const mild::RelativePose& pose = c.verification.pose;

@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
@@ -19,6 +20,7 @@
 #include "common/progress_bar.hpp"
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
@@ -44,12 +46,16 @@ struct Options {
   int min_gap = 40;
   bool print_config = false;
   bool help_parameters = false;
+  bool fit_every_candidate = false;
+  double scale = 1.0;
+  int stats_window = 1000;
 };
 
 // Reads one frame as 8-bit grey, BGR or BGRA; nullopt when the file cannot be decoded.
-std::optional<std::pair<cv::Mat, mild::PixelFormat>> readFrame(const std::string& path) {
+std::optional<std::pair<cv::Mat, mild::PixelFormat>> readFrame(const std::string& path, double scale) {
   cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (image.empty()) return std::nullopt;
+  if (scale != 1.0) cv::resize(image, image, cv::Size(), scale, scale, scale > 1.0 ? cv::INTER_LINEAR : cv::INTER_AREA);
   if (image.depth() == CV_16U) image.convertTo(image, CV_8U, 1.0 / 256.0);
   if (image.depth() != CV_8U) return std::nullopt;
   if (const auto format = mild::decodedPixelFormat(image.channels())) return std::make_pair(image, *format);
@@ -68,6 +74,8 @@ int run(const Options& opt) {
     std::cout << mild::parameterMarkdown();
     return 0;
   }
+  // Training data for the scorer (scripts/fit_scoring.py) needs every candidate's inliers.
+  if (opt.fit_every_candidate) params.verification.early_stop = false;
   if (opt.print_config) {
     std::cout << mild::parameterYaml(params);
     if (opt.images.empty()) return 0;
@@ -97,7 +105,7 @@ int run(const Options& opt) {
     details.open(opt.details);
     if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
     details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
-               "homography_share,verified,accepted,near_past";
+               "homography_share,verified,accepted,near_past,fit_skipped";
     // The scorer's feature vector, as it computes it: scripts/fit_scoring.py fits on these columns.
     for (const std::string& name : mild::CandidateScorer::featureNames()) details << "," << name;
     details << "\n";
@@ -105,20 +113,22 @@ int run(const Options& opt) {
 
   mild::LoopDetector detector(params);
   const size_t n = seq.frames.size();
-  std::vector<double> extract_ms, query_ms, filter_ms, verify_ms, keyframe_ms;
+  std::vector<double> extract_ms, query_ms, filter_ms, verify_ms, keyframe_ms, keyframe_cpu_ms;
   std::vector<float> similarity_matrix;
   if (!opt.similarity.empty()) similarity_matrix.assign(n * n, 0.0f);
   size_t skipped = 0, features = 0;
   mild::tools::ProgressBar progress(n, "mild_offline");
   for (size_t i = 0; i < n; ++i) {
     progress.update(i);
-    auto frame = readFrame(seq.frames[i]);
+    auto frame = readFrame(seq.frames[i], opt.scale);
     if (!frame) {
       ++skipped;
       std::cerr << "\nwarning: frame " << i << " (" << seq.frames[i] << ") cannot be read as an image; skipped\n";
       continue;
     }
+    const double cpu_start = mild::threadCpuMs();
     const mild::DetectionResult r = detector.process(frame->first, frame->second, seq.stamps[i], i);
+    keyframe_cpu_ms.push_back(mild::threadCpuMs() - cpu_start);
     extract_ms.push_back(r.stats.extract_ms);
     query_ms.push_back(r.stats.query_ms);
     filter_ms.push_back(r.stats.filter_ms);
@@ -135,7 +145,8 @@ int run(const Options& opt) {
         details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
                 << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << ","
                 << v.inliers << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << ","
-                << (v.verified ? 1 : 0) << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes;
+                << (v.verified ? 1 : 0) << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << ","
+                << (v.fit_skipped ? 1 : 0);
         for (double x : mild::CandidateScorer::features(c.filter_probability, v)) details << "," << x;
         details << "\n";
       }
@@ -196,6 +207,8 @@ int run(const Options& opt) {
                   {"filter_ms", timingJson(filter_ms)},
                   // The whole pipeline per keyframe: the four stages' sum (their own medians do not add up).
                   {"keyframe_ms", timingJson(keyframe_ms)},
+                  // The same in this thread's CPU time: robust to other processes on the cores.
+                  {"keyframe_cpu_ms", timingJson(keyframe_cpu_ms)},
                   {"keyframes", detector.size()},
                   {"features", detector.database().featureCount()},
                   {"memory_bytes", detector.memoryBytes()},
@@ -204,6 +217,31 @@ int run(const Options& opt) {
                   {"frames", n},
                   {"skipped_frames", skipped}};
     if (detector.verifies()) stats["verify_ms"] = timingJson(verify_ms);
+    // Medians per window of keyframes, in order: what each stage costs as the map grows.
+    json windows = json::array();
+    const size_t w = static_cast<size_t>(opt.stats_window);
+    for (size_t begin = 0; begin < keyframe_ms.size(); begin += w) {
+      const size_t end = std::min(keyframe_ms.size(), begin + w);
+      const auto median = [&](const std::vector<double>& v) {
+        return mild::tools::summarize(
+                   std::vector<double>(v.begin() + static_cast<long>(begin), v.begin() + static_cast<long>(end)))
+            .median;
+      };
+      windows.push_back(
+          {{"first", begin},
+           {"last", end - 1},
+           {"extract_ms", median(extract_ms)},
+           {"query_ms", median(query_ms)},
+           {"filter_ms", median(filter_ms)},
+           {"verify_ms", median(verify_ms)},
+           {"keyframe_ms", median(keyframe_ms)},
+           {"keyframe_cpu_ms", median(keyframe_cpu_ms)},
+           {"keyframe_cpu_ms_p99",
+            mild::tools::percentile(std::vector<double>(keyframe_cpu_ms.begin() + static_cast<long>(begin),
+                                                        keyframe_cpu_ms.begin() + static_cast<long>(end)),
+                                    0.99)}});
+    }
+    stats["windows"] = windows;
     if (!pose_summary.is_null()) stats["relative_pose"] = pose_summary;
     std::ofstream out(opt.stats);
     out << stats.dump(2) << "\n";
@@ -252,6 +290,16 @@ int main(int argc, char** argv) {
   app.add_option("--min-gap", opt.min_gap,
                  "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
       ->check(CLI::NonNegativeNumber);
+  app.add_flag("--fit-every-candidate", opt.fit_every_candidate,
+               "verification/early_stop off: every candidate's model fitted, as scripts/fit_scoring.py needs in "
+               "--details (each keyframe's best candidate, and what is accepted, are the same either way)");
+  app.add_option("--scale", opt.scale,
+                 "resize every frame by this factor before detection (speed at other image sizes, e.g. 2 for 640 x 480 "
+                 "from 320 x 240)")
+      ->check(CLI::Range(0.1, 8.0));
+  app.add_option("--stats-window", opt.stats_window,
+                 "--stats also gives each stage's median per window of this many keyframes, in order")
+      ->check(CLI::Range(1, 1000000));
   app.add_flag("--print-config", opt.print_config,
                "print the effective parameters as YAML, with their bounds and meaning (alone: and exit; with the "
                "defaults it is config/default.yaml)");

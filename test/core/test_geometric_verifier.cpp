@@ -109,4 +109,67 @@ TEST(GeometricVerifier, OneBadCandidateAmongManyIsAClearErrorAndTheVerifierStays
   for (size_t i = 0; i < after.size(); ++i) expectSame(after[i], before[i], i);
 }
 
+TEST(GeometricVerifier, AFitTheCallerDeclinesIsSkippedAfterMatchingAndTheOthersAreUnchanged) {
+  const Features query = sampleFrame(209);
+  const std::vector<Features> candidates = mixedCandidates();
+  const GeometricVerifier verifier{VerificationParams{}};
+  const std::vector<Verification> every = verifier.verifyAll(query, candidates);
+  std::vector<size_t> earlier_seen;
+  const auto every_other = [&](size_t index, int matches, const std::vector<Verification>& earlier) {
+    EXPECT_EQ(matches, every[index].matches) << "needs_fit sees the candidate's descriptor matches";
+    earlier_seen.push_back(earlier.size());
+    return index % 2 == 0;
+  };
+  const std::vector<Verification> some = verifier.verifyAll(query, candidates, every_other);
+  ASSERT_EQ(some.size(), candidates.size());
+  for (size_t i = 0; i < some.size(); ++i) {
+    if (i % 2 == 0) {
+      expectSame(some[i], every[i], i);
+      EXPECT_FALSE(some[i].fit_skipped);
+    } else {
+      EXPECT_TRUE(some[i].fit_skipped);
+      EXPECT_TRUE(some[i].attempted);
+      EXPECT_FALSE(some[i].verified);
+      EXPECT_EQ(some[i].inliers, 0);
+      EXPECT_EQ(some[i].matches, every[i].matches);
+    }
+    EXPECT_EQ(earlier_seen[i], i) << "needs_fit is given the verifications before the candidate";
+  }
+}
+
+TEST(GeometricVerifier, EveryRobustEstimatorVerifiesTheSameRevisitAndRejectsAnotherPlace) {
+  const Features query = sampleFrame(209);
+  const Features revisit = sampleFrame(208);  // the same place a moment earlier
+  const Features elsewhere = sampleFrame(120);
+  VerificationParams params;
+  params.method = "magsac";
+  const Verification reference = GeometricVerifier(params).verify(query, revisit);
+  ASSERT_TRUE(reference.verified);
+  ASSERT_FALSE(GeometricVerifier(params).verify(query, elsewhere).verified);
+  for (const std::string& method : mild::robustMethods()) {
+    SCOPED_TRACE(method);
+    params.method = method;
+    const GeometricVerifier verifier(params);
+    const Verification v = verifier.verify(query, revisit);
+    EXPECT_TRUE(v.verified);
+    EXPECT_EQ(v.matches, reference.matches);  // the estimator changes the fit, not the matching
+    EXPECT_FALSE(verifier.verify(query, elsewhere).verified);
+  }
+  params.method = "lmeds";
+  EXPECT_THROW(GeometricVerifier{params}, mild::InvalidInput);
+}
+
+TEST(GeometricVerifier, TheLayoutOfInliersIsMeasuredForVerifiedCandidatesOnly) {
+  const Features query = sampleFrame(209);
+  const GeometricVerifier verifier{VerificationParams{}};
+  const Verification loop = verifier.verify(query, sampleFrame(208));
+  ASSERT_TRUE(loop.verified);
+  EXPECT_GT(loop.coverage, 0.0);
+  EXPECT_GT(loop.homography_share, 0.0);
+  const Verification other = verifier.verify(query, sampleFrame(120));
+  ASSERT_FALSE(other.verified);
+  EXPECT_EQ(other.coverage, 0.0);
+  EXPECT_EQ(other.homography_share, 0.0);
+}
+
 }  // namespace

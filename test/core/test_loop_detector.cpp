@@ -233,8 +233,9 @@ TEST(LoopDetector, RunsTheInstalledVerifierOnEveryCandidate) {
 // A verifier of its own that answers for fewer candidates than it was given.
 class ShortVerifier : public CountingVerifier {
  public:
-  std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates) const override {
-    std::vector<Verification> out = CountingVerifier::verifyAll(query, candidates);
+  std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates,
+                                      const NeedsFit& needs_fit) const override {
+    std::vector<Verification> out = CountingVerifier::verifyAll(query, candidates, needs_fit);
     out.pop_back();
     return out;
   }
@@ -256,6 +257,43 @@ TEST(LoopDetector, AVerifierThatLosesACandidateIsAnErrorNotAShortList) {
     }
   }
   EXPECT_TRUE(thrown);
+}
+
+TEST(LoopDetector, StoppingVerificationEarlyKeepsEveryKeyframesBestCandidateAndWhatIsAccepted) {
+  // The sample (a corridor walked twice): more keyframes and candidates than the fixture.
+  const std::vector<cv::Mat>& frames = test::sampleFrames();
+  DetectorParams every = fixtureParams();
+  every.verification.early_stop = false;
+  DetectorParams early = every;
+  early.verification.early_stop = true;
+  LoopDetector reference(every), detector(early);
+  size_t skipped = 0, candidates = 0, accepted = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    SCOPED_TRACE("keyframe " + std::to_string(i));
+    const DetectionResult a = reference.process(frames[i], PixelFormat::kGray, 0.5 * i, i);
+    const DetectionResult b = detector.process(frames[i], PixelFormat::kGray, 0.5 * i, i);
+    ASSERT_EQ(a.candidates.size(), b.candidates.size());
+    if (a.candidates.empty()) continue;
+    EXPECT_EQ(a.candidates.front().id, b.candidates.front().id);
+    EXPECT_EQ(a.candidates.front().probability, b.candidates.front().probability);
+    std::set<uint64_t> accepted_a, accepted_b;
+    for (const LoopCandidate& c : a.candidates) {
+      if (c.accepted) accepted_a.insert(c.id);
+      EXPECT_FALSE(c.verification.fit_skipped);
+    }
+    for (const LoopCandidate& c : b.candidates) {
+      if (c.accepted) accepted_b.insert(c.id);
+      if (c.verification.fit_skipped) {
+        ++skipped;
+        EXPECT_LT(c.probability, kDecision);
+      }
+    }
+    EXPECT_EQ(accepted_a, accepted_b);
+    candidates += b.candidates.size();
+    accepted += accepted_b.size();
+  }
+  EXPECT_GT(accepted, 0u);
+  EXPECT_GT(skipped, 0u) << "of " << candidates << " candidates: nothing left to save";
 }
 
 TEST(LoopDetector, RejectsDepthsAndCamerasThatDoNotFit) {

@@ -646,9 +646,14 @@ TEST(Conversions, TheRelativePoseIsPublishedAsAUnitQuaternionAndDirection) {
   posed.verification.pose.rotation = cv::Matx33d(std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a));
   posed.verification.pose.translation = cv::Vec3d(0.6, 0.0, 0.8);
   posed.verification.pose.inliers = 42;
+  plain.verification.fit_skipped = true;
+  plain.verification.matches = 17;
   result.candidates = {posed, plain};
   const LoopClosure msg = loopClosureToMsg(result, std_msgs::Header(), 10);
   ASSERT_EQ(msg.candidates.size(), 2u);
+  EXPECT_FALSE(msg.candidates[0].fit_skipped);
+  EXPECT_TRUE(msg.candidates[1].fit_skipped) << "a candidate not fitted says so, not only 'not verified'";
+  EXPECT_EQ(msg.candidates[1].matches, 17);
   const auto& q = msg.candidates[0].relative_rotation;
   EXPECT_TRUE(msg.candidates[0].has_relative_pose);
   EXPECT_NEAR(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w, 1.0, 1e-12);

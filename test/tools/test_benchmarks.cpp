@@ -26,6 +26,28 @@ TEST(MildBenchMatch, PrintsBothRatiosAndTheRecoveredFractions) {
   EXPECT_GT(out["sparse_recovery"].get<double>(), 0.8) << "sparse match finds most brute-force pairs under 50 bits";
 }
 
+TEST(MildBenchTeam, ReportsEachTeamSizeAgainstTheFirstAndFindsTheOtherRobotsPlaces) {
+  // Two robots walking the same corridor: every place of robot 2 is in robot 1's map.
+  const auto run = mild::test::runCommand(std::string(MILD_BENCH_TEAM_BIN) + " --walk " + kSample + " --walk " +
+                                          kSample + " --robots 1,2 --keyframes 80 --json");
+  ASSERT_EQ(run.status, 0) << run.output;
+  const json out = json::parse(mild::test::lastLine(run.output));
+  ASSERT_EQ(out["rows"].size(), 2u);
+  const json& lone = out["rows"][0];
+  const json& pair = out["rows"][1];
+  EXPECT_EQ(lone["robots"].get<int>(), 1);
+  EXPECT_EQ(lone["keyframes"].get<int>(), 80);
+  EXPECT_EQ(pair["keyframes"].get<int>(), 160) << "every robot's keyframes, interleaved";
+  EXPECT_DOUBLE_EQ(lone["ratio_to_first"].get<double>(), 1.0);
+  EXPECT_GT(pair["cpu_ms_median"].get<double>(), 0.0);
+  EXPECT_EQ(lone["inter_robot_candidates_per_keyframe"].get<double>(), 0.0) << "a lone robot has no other map";
+  EXPECT_GT(pair["inter_robot_candidates_per_keyframe"].get<double>(), 0.0);
+  const auto short_team =
+      mild::test::runCommand(std::string(MILD_BENCH_TEAM_BIN) + " --walk " + kSample + " --robots 1,2 --keyframes 5");
+  EXPECT_EQ(short_team.status, 2) << "a team of two needs two walks: " << short_team.output;
+  EXPECT_NE(short_team.output.find("needs as many --walk"), std::string::npos) << short_team.output;
+}
+
 TEST(MildBenchScale, ReportsEveryColumnPerSize) {
   const auto run = mild::test::runCommand(std::string(MILD_BENCH_SCALE_BIN) + " --images " + kSample +
                                           " --sizes 30,60 --features 200 --queries 3 --brute-queries 1 "

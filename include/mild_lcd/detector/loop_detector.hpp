@@ -278,6 +278,11 @@ class LoopDetector {
   KeyframeIndex eligibleCount(double stamp) const;
   // Where this detector's own keyframe at `stamp` may find candidates (exclusion, near-past band).
   MapScope ownScope(double stamp) const;
+  // Whether fitting candidate i (with `matches` descriptor matches) can change what is reported:
+  // false when even `matches` inliers would leave it below the decision probability and below a
+  // candidate already verified (verification/early_stop).
+  bool fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
+                    const std::vector<Verification>& earlier) const;
   // Verifies (when verifying) each candidate against the query, in the map it came from
   // (maps[i] for candidates[i]), then scores and judges it.
   void judge(std::vector<LoopCandidate>& candidates, const Features& query,

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "mild_lcd/features/feature_match.hpp"
@@ -12,6 +13,9 @@ namespace mild {
 struct Verification {
   bool attempted = false;
   bool verified = false;
+  // No model was fitted: the descriptor matches alone showed that no fit could change the answer
+  // (CandidateVerifier::NeedsFit). `matches` is set, `inliers` is 0.
+  bool fit_skipped = false;
   int matches = 0;  // descriptor matches fed to the geometric model
   int inliers = 0;  // matches consistent with it
   double inlier_ratio = 0.0;
@@ -26,11 +30,18 @@ struct Verification {
 // decide whether they see the same place.
 class CandidateVerifier {
  public:
+  // Asked before fitting candidate `index` with `matches` descriptor matches, given the
+  // verifications of the candidates before it: false skips the fit (the caller knows that even
+  // `matches` inliers could not make it count). Empty: every candidate is fitted.
+  using NeedsFit = std::function<bool(size_t index, int matches, const std::vector<Verification>& earlier)>;
+
   virtual ~CandidateVerifier() = default;
   virtual Verification verify(const Features& query, const Features& candidate) const = 0;
   // Every candidate of one query, results in their order. One after another unless a verifier can
-  // do better (GeometricVerifier: concurrently).
-  virtual std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates) const {
+  // do better (GeometricVerifier: concurrently, or skipping the fits `needs_fit` declines).
+  virtual std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates,
+                                              const NeedsFit& needs_fit = {}) const {
+    (void)needs_fit;  // a verifier that cannot split matching from fitting fits every candidate
     std::vector<Verification> out;
     out.reserve(candidates.size());
     for (const Features& candidate : candidates) out.push_back(verify(query, candidate));

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -9,11 +10,15 @@
 
 namespace mild {
 
+// The robust estimators verification/method may name, in OpenCV's terms (geometric_verifier.cpp).
+const std::vector<std::string>& robustMethods();
+
 struct VerificationParams {
   bool enabled = true;
   // How query and candidate are matched: sparse match with Lowe's ratio test at 0.8 (without it,
   // hundreds of raw nearest neighbours let wrong pairs collect tens of chance inliers).
   SparseMatchParams matching = withRatio(0.8);
+  std::string method = "usac_fast";  // the robust estimator: robustMethods() (geometric_verifier.cpp)
   double ransac_threshold = 1.0;
   double confidence = 0.999;
   int max_iterations = 1000;
@@ -21,6 +26,7 @@ struct VerificationParams {
   double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
   double pnp_threshold = 3.0;
   bool parallel_candidates = false;
+  bool early_stop = true;
 
   static constexpr int kMinimalMatches = 8;  // the eight-point minimum of a two-view model
   static constexpr const char* kSection = "verification";
@@ -28,11 +34,18 @@ struct VerificationParams {
   static void declare(Self& p, Visit&& v) {
     v("enabled", p.enabled, Bounds::any(),
       "Geometric verification of every reported candidate: sparse match (MIH, seed paper IV.B) of query and "
-      "candidate, then a two-view model fitted with MAGSAC. Candidates that fail it are still reported (verified "
+      "candidate, then a two-view model fitted robustly (verification/method). Candidates that fail it are still "
+      "reported (verified "
       "= false), with the low probability their few inliers give (scoring/); only verified ones are accepted. "
       "Its inlier count is the published probability's evidence that means the same on real frames as on "
       "renders (docs/accuracy.md).");
     SparseMatchParams::declare(p.matching, v);
+    v("method", p.method, Bounds::oneOf(robustMethods()),
+      "Model fit: OpenCV's robust estimator. usac_fast (USAC_FAST: RANSAC with few local-optimisation steps), "
+      "magsac (USAC_MAGSAC, the default before 2026-12), usac (USAC_DEFAULT), usac_prosac (USAC_PROSAC, "
+      "matches ordered by descriptor distance), ransac (classic RANSAC). On the bench's real and public "
+      "sequences usac_fast took 0.79 of magsac's CPU per keyframe with recall@100%P and AP within 0.01 on every "
+      "sequence (docs/speed.md, \"What each stage costs\").");
     v("ransac_threshold", p.ransac_threshold, Bounds::above(0).runtime(), "Model fit: inlier threshold in pixels.");
     v("confidence", p.confidence, Bounds::between(0, 1), "Model fit: RANSAC confidence.");
     v("max_iterations", p.max_iterations, Bounds::atLeast(1), "Model fit: iteration cap.");
@@ -54,6 +67,14 @@ struct VerificationParams {
       "unless the process set fewer). The same results either way; on two cores three candidates take about 0.7 "
       "of the time, but in the soak at 30 Hz on two cores the node dropped keyframes with it and none without it, "
       "so it is off by default (docs/speed.md, \"Verification on two cores\").");
+    v("early_stop", p.early_stop, Bounds::any(),
+      "Fit a candidate's model only when it could matter: after its descriptor matches, a candidate whose "
+      "published probability stays below scoring/decision_probability even if every match were an inlier, and "
+      "below a candidate of the same keyframe already verified, is reported unfitted "
+      "(fit_skipped in mild_offline --details). What is accepted, and each keyframe's best candidate, are the same "
+      "either way; "
+      "the rest of the candidates' probabilities may be lower. Off (false) when fitting the scorer: its "
+      "training data need every candidate's inliers.");
   }
 
   bool usesIntrinsics() const { return fx > 0.0; }
@@ -83,8 +104,10 @@ class GeometricVerifier : public CandidateVerifier {
 
   Verification verify(const Features& query, const Features& candidate) const override;
   // With parallel_candidates, one matcher per candidate and the candidates spread over OpenCV's
-  // threads; an exception from any of them is rethrown (the first by candidate order).
-  std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates) const override;
+  // threads (every one fitted); an exception from any of them is rethrown (the first by candidate
+  // order). Otherwise one after another, each matched and then fitted unless `needs_fit` declines.
+  std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates,
+                                      const NeedsFit& needs_fit = {}) const override;
   GeometricCheck check(const Features& query, const Features& candidate) const;
 
   // The model fit alone, on given matches (keypoints index the matches' query/train fields). The

@@ -413,7 +413,13 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features&
     std::vector<Features> candidate_features;
     candidate_features.reserve(candidates.size());
     for (size_t i = 0; i < candidates.size(); ++i) candidate_features.push_back(maps[i]->features(candidates[i].index));
-    std::vector<Verification> verifications = verifier_->verifyAll(query, candidate_features);
+    CandidateVerifier::NeedsFit needs_fit;
+    if (params_.verification.early_stop) {
+      needs_fit = [&](size_t i, int matches, const std::vector<Verification>& earlier) {
+        return fitCanMatter(candidates, i, matches, earlier);
+      };
+    }
+    std::vector<Verification> verifications = verifier_->verifyAll(query, candidate_features, needs_fit);
     if (verifications.size() != candidates.size()) {
       throw std::logic_error("the candidate verifier returned " + std::to_string(verifications.size()) +
                              " verifications for " + std::to_string(candidates.size()) + " candidates");
@@ -425,6 +431,23 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features&
     c.accepted = c.verification.verified && c.probability >= params_.scoring.decision_probability;
   }
   rankCandidates(candidates, params_.candidates.min_probability);
+}
+
+bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
+                                const std::vector<Verification>& earlier) const {
+  // The published probability as a function of the inliers, at its highest over 0..matches (the
+  // inliers are a subset of the matches; the scorer is monotone in them, either way).
+  Verification none, all;
+  all.inliers = matches;
+  const double fp = candidates[i].filter_probability;
+  const double reachable = std::max(scorer_.probability(fp, none), scorer_.probability(fp, all));
+  if (reachable >= params_.scoring.decision_probability) return true;  // it could be accepted
+  // Below the decision either way: it matters only if it could outrank the query's best so far,
+  // which is all the evaluation (and a consumer taking the best candidate) reads.
+  for (size_t k = 0; k < earlier.size(); ++k) {
+    if (scorer_.probability(candidates[k].filter_probability, earlier[k]) > reachable) return false;
+  }
+  return true;
 }
 
 void rankCandidates(std::vector<LoopCandidate>& candidates, double min_probability) {
