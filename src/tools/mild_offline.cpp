@@ -222,24 +222,19 @@ int run(const Options& opt) {
     const size_t w = static_cast<size_t>(opt.stats_window);
     for (size_t begin = 0; begin < keyframe_ms.size(); begin += w) {
       const size_t end = std::min(keyframe_ms.size(), begin + w);
-      const auto median = [&](const std::vector<double>& v) {
+      const auto slice = [&](const std::vector<double>& v) {
         return mild::tools::summarize(
-                   std::vector<double>(v.begin() + static_cast<long>(begin), v.begin() + static_cast<long>(end)))
-            .median;
+            std::vector<double>(v.begin() + static_cast<long>(begin), v.begin() + static_cast<long>(end)));
       };
-      windows.push_back(
-          {{"first", begin},
-           {"last", end - 1},
-           {"extract_ms", median(extract_ms)},
-           {"query_ms", median(query_ms)},
-           {"filter_ms", median(filter_ms)},
-           {"verify_ms", median(verify_ms)},
-           {"keyframe_ms", median(keyframe_ms)},
-           {"keyframe_cpu_ms", median(keyframe_cpu_ms)},
-           {"keyframe_cpu_ms_p99",
-            mild::tools::percentile(std::vector<double>(keyframe_cpu_ms.begin() + static_cast<long>(begin),
-                                                        keyframe_cpu_ms.begin() + static_cast<long>(end)),
-                                    0.99)}});
+      windows.push_back({{"first", begin},
+                         {"last", end - 1},
+                         {"extract_ms", slice(extract_ms).median},
+                         {"query_ms", slice(query_ms).median},
+                         {"filter_ms", slice(filter_ms).median},
+                         {"verify_ms", slice(verify_ms).median},
+                         {"keyframe_ms", slice(keyframe_ms).median},
+                         {"keyframe_cpu_ms", slice(keyframe_cpu_ms).median},
+                         {"keyframe_cpu_ms_p99", slice(keyframe_cpu_ms).p99}});
     }
     stats["windows"] = windows;
     if (!pose_summary.is_null()) stats["relative_pose"] = pose_summary;

@@ -69,6 +69,12 @@ TEST_F(MildOffline, WritesCandidatesStatsPlotsAndScores) {
   EXPECT_EQ(stats["keyframes"].get<int>(), 60);
   EXPECT_GT(stats["features"].get<int>(), 1000);
   EXPECT_GT(stats["memory_bytes"].get<int>(), 0);
+  // The thread's CPU time per keyframe, and per window of 1,000 keyframes (one here: 60 keyframes).
+  EXPECT_GT(stats["keyframe_cpu_ms"]["median"].get<double>(), 0.0);
+  ASSERT_EQ(stats["windows"].size(), 1u);
+  EXPECT_EQ(stats["windows"][0]["first"].get<int>(), 0);
+  EXPECT_EQ(stats["windows"][0]["last"].get<int>(), 59);
+  EXPECT_DOUBLE_EQ(stats["windows"][0]["keyframe_ms"].get<double>(), stats["keyframe_ms"]["median"].get<double>());
 
   for (const char* png : {"pr_curve.png", "loops_matrix.png"}) {
     const fs::path p = dir_ / "plots" / png;

@@ -120,6 +120,8 @@ class GeometricVerifier : public CandidateVerifier {
   GeometricCheck fitViews(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
                           const CameraIntrinsics& query_camera, const CameraIntrinsics& train_camera,
                           const std::vector<float>& query_depths, std::vector<FeatureMatch> matches) const;
+  // The sparse match alone, after checking that each side has one keypoint per descriptor.
+  static std::vector<FeatureMatch> matchWith(SparseMatcher& matcher, const Features& query, const Features& candidate);
   GeometricCheck checkWith(SparseMatcher& matcher, const Features& query, const Features& candidate) const;
 
   VerificationParams params_;

@@ -69,11 +69,7 @@ std::vector<Verification> GeometricVerifier::verifyAll(const Features& query, co
     out.reserve(candidates.size());
     for (size_t i = 0; i < candidates.size(); ++i) {
       const Features& candidate = candidates[i];
-      if (query.keypoints.size() != query.descriptors.size() ||
-          candidate.keypoints.size() != candidate.descriptors.size()) {
-        throw InvalidInput("geometric verification needs one keypoint per descriptor");
-      }
-      std::vector<FeatureMatch> matches = matchers_.front().match(query.descriptors, candidate.descriptors);
+      std::vector<FeatureMatch> matches = matchWith(matchers_.front(), query, candidate);
       if (needs_fit && !needs_fit(i, static_cast<int>(matches.size()), out)) {
         Verification skipped;
         skipped.attempted = true;
@@ -112,13 +108,18 @@ GeometricCheck GeometricVerifier::check(const Features& query, const Features& c
   return checkWith(matchers_.front(), query, candidate);
 }
 
-GeometricCheck GeometricVerifier::checkWith(SparseMatcher& matcher, const Features& query,
-                                            const Features& candidate) const {
+std::vector<FeatureMatch> GeometricVerifier::matchWith(SparseMatcher& matcher, const Features& query,
+                                                       const Features& candidate) {
   if (query.keypoints.size() != query.descriptors.size() ||
       candidate.keypoints.size() != candidate.descriptors.size()) {
     throw InvalidInput("geometric verification needs one keypoint per descriptor");
   }
-  return fit(query, candidate, matcher.match(query.descriptors, candidate.descriptors));
+  return matcher.match(query.descriptors, candidate.descriptors);
+}
+
+GeometricCheck GeometricVerifier::checkWith(SparseMatcher& matcher, const Features& query,
+                                            const Features& candidate) const {
+  return fit(query, candidate, matchWith(matcher, query, candidate));
 }
 
 GeometricCheck GeometricVerifier::fit(const Features& query, const Features& train,
