@@ -101,7 +101,7 @@ class KeyframeDatabase {
 
   int descriptorBytes() const { return params_.descriptor_bytes; }
   size_t size() const { return keyframe_offsets_.size() - 1; }
-  size_t featureCount() const { return heads_.size(); }
+  size_t featureCount() const { return rows_.size() / static_cast<size_t>(row_words_); }
   size_t featureCount(KeyframeIndex k) const { return keyframe_offsets_[k + 1] - keyframe_offsets_[k]; }
   FeatureId firstFeature(KeyframeIndex k) const { return keyframe_offsets_[k]; }
   KeyframeIndex keyframeOf(FeatureId f) const;
@@ -116,6 +116,7 @@ class KeyframeDatabase {
   struct IndexScratch;
   using Vote = detail::DatabaseVote;
   int fullDistance(const Descriptor& q, FeatureId f) const;
+  const uint64_t* rowOf(FeatureId f) const { return rows_.data() + static_cast<size_t>(f) * row_words_; }
   // The query of one feature through the index: its votes (pairs within d0) into `votes` (empty),
   // with the tails' word count known at compile time where it can be (kTailWords 0: read at run
   // time), so that ORB's and BRISK's distances are unrolled loops.
@@ -127,9 +128,13 @@ class KeyframeDatabase {
   SimilarityParams similarity_;
   PhiTable phi_;
   MihIndex index_;
-  int tail_words_ = 0;                       // words after the first, per feature
-  MappedArray<uint64_t> heads_;              // first 64 bits of every feature
-  MappedArray<uint64_t> tails_;              // the other words, tail_words_ per feature
+  int row_words_ = 0;  // 64-bit words per feature
+  // Every feature's descriptor, row after row. One row, not the first words in an array of their own:
+  // a candidate costs one random read from memory (a row of ORB is 32 bytes, half a cache line,
+  // never split across two: the array is page aligned), and the third of candidates that pass early
+  // termination find the rest of their descriptor in the line already read. With the first words
+  // apart, each survivor cost a second miss (docs/speed.md, "One row per descriptor").
+  MappedArray<uint64_t> rows_;
   std::vector<FeatureId> keyframe_offsets_;  // keyframe k owns features [offsets[k], offsets[k+1])
   // Every vote needs its keyframe: a binary search over keyframe_offsets_ per vote cost 9% of a query
   // at 1,000 keyframes. block_keyframe_[b] is the keyframe holding feature b << kBlockShift, so a lookup searches only

@@ -95,7 +95,7 @@ KeyframeDatabase::KeyframeDatabase(const DatabaseParams& params)
       similarity_(params.similarity.scaledTo(params.descriptor_bytes * 8)),
       phi_(similarity_),
       index_(params.index, params.descriptor_bytes * 8),
-      tail_words_(descriptorWords(params.descriptor_bytes) - 1) {
+      row_words_(descriptorWords(params.descriptor_bytes)) {
   keyframe_offsets_.push_back(0);
 }
 
@@ -108,8 +108,7 @@ void KeyframeDatabase::setSimilarityParams(const SimilarityParams& params) {
 
 void KeyframeDatabase::clear() {
   index_.clear();
-  heads_.release();
-  tails_.release();
+  rows_.release();
   keyframe_offsets_.assign(1, 0);
   block_keyframe_.clear();
 }
@@ -131,20 +130,18 @@ KeyframeIndex KeyframeDatabase::insert(const DescriptorList& descriptors) {
   const uint64_t total = static_cast<uint64_t>(featureCount()) + descriptors.size();
   const KeyframeIndex k = static_cast<KeyframeIndex>(size());
   const FeatureId first = static_cast<FeatureId>(featureCount());
-  if (total > heads_.capacity()) {
+  const size_t row_words = static_cast<size_t>(row_words_);
+  if (total * row_words > rows_.capacity()) {
     // Grow by a quarter rather than double: descriptors are most of the memory, and doubling would
     // leave up to half of it unused (an extra 16 bytes per feature on average).
-    const size_t grown = std::max<size_t>(total, heads_.capacity() + heads_.capacity() / 4 + 1024);
-    heads_.reserve(grown);
-    tails_.reserve(grown * static_cast<size_t>(tail_words_));
+    const size_t capacity = rows_.capacity() / row_words;
+    rows_.reserve(std::max<size_t>(total, capacity + capacity / 4 + 1024) * row_words);
   }
-  const size_t tail_words = static_cast<size_t>(tail_words_);
-  size_t at = tails_.size();
-  tails_.resize(at + descriptors.size() * tail_words);
-  uint64_t* tails = tails_.data();
+  size_t at = rows_.size();
+  rows_.resize(at + descriptors.size() * row_words);
+  uint64_t* rows = rows_.data();
   for (const Descriptor& d : descriptors) {
-    heads_.push_back(d.words[0]);
-    for (size_t w = 0; w < tail_words; ++w) tails[at++] = d.words[1 + w];
+    for (size_t w = 0; w < row_words; ++w) rows[at++] = d.words[w];
   }
   index_.insertKeyframe(descriptors.data(), descriptors.size(), first);
   keyframe_offsets_.push_back(static_cast<FeatureId>(total));
@@ -165,8 +162,7 @@ KeyframeIndex KeyframeDatabase::keyframeOf(FeatureId f) const {
 }
 
 int KeyframeDatabase::fullDistance(const Descriptor& q, FeatureId f) const {
-  return popcount64(q.words[0] ^ heads_[f]) +
-         hammingWords(q.words.data() + 1, tails_.data() + static_cast<size_t>(f) * tail_words_, tail_words_);
+  return hammingWords(q.words.data(), rowOf(f), row_words_);
 }
 
 void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
@@ -175,8 +171,7 @@ void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
     checkDescriptorWidth(k, params_.descriptor_bytes, "keyframe");
     total += k.size();
   }
-  heads_.reserve(total);
-  tails_.reserve(total * static_cast<size_t>(tail_words_));
+  rows_.reserve(total * static_cast<size_t>(row_words_));
   keyframe_offsets_.reserve(keyframe_offsets_.size() + keyframes.size());
   index_.deferMerges(true);
   try {
@@ -190,9 +185,8 @@ void KeyframeDatabase::insertAll(const std::vector<DescriptorList>& keyframes) {
 
 Descriptor KeyframeDatabase::descriptor(FeatureId f) const {
   Descriptor d(params_.descriptor_bytes);
-  d.words[0] = heads_[f];
-  const uint64_t* tail = tails_.data() + static_cast<size_t>(f) * tail_words_;
-  std::copy(tail, tail + tail_words_, d.words.begin() + 1);
+  const uint64_t* row = rowOf(f);
+  std::copy(row, row + row_words_, d.words.begin());
   return d;
 }
 
@@ -212,54 +206,62 @@ void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, Index
   const SimilarityParams& sp = similarity_;
   const int d0 = sp.max_distance;
   const int tp = sp.early_termination_threshold;
+  const size_t tail_words = kTailWords > 0 ? static_cast<size_t>(kTailWords) : static_cast<size_t>(row_words_ - 1);
+  const uint64_t* rest = f.words.data() + 1;
+  // The distance of a candidate that passed early termination (`partial` on the first word).
+  const auto vote = [&](FeatureId id, int partial) {
+    const uint64_t* tail = rowOf(id) + 1;
+    const int d = partial + (kTailWords > 0 ? hammingWords<kTailWords>(rest, tail)
+                                            : hammingWords(rest, tail, static_cast<int>(tail_words)));
+    if (d <= d0) votes.push_back({id, 0, phi_(d)});
+  };
+  constexpr size_t kAhead = 16;
   ProbeCounters counters;
-  auto& survivors = scratch.survivors;
-  survivors.clear();
-  size_t n_candidates = 0;
+  size_t n_candidates = 0, passed = 0, distances = 0;
   if (index_.params().inline_prefixes) {
-    // The first 64 bits sit beside each id in its bucket: one sequential pass, no random reads.
+    // The first 64 bits sit beside each id in its bucket: one sequential pass, no random reads;
+    // then the rows of the survivors, a few requested ahead of the one being read.
+    auto& survivors = scratch.survivors;
+    survivors.clear();
     index_.probeWithPrefixes(f, id_limit, counters, [&](FeatureId id, uint64_t prefix) {
       const int partial = popcount64(f.words[0] ^ prefix);
       if (partial <= tp) survivors.push_back({id, partial});
     });
     n_candidates = counters.entries_visited;
+    passed = survivors.size();
+    scratch.met.clear(passed);
+    survivors.erase(std::remove_if(survivors.begin(), survivors.end(),
+                                   [&](const IndexScratch::Survivor& s) { return !scratch.met.insert(s.id); }),
+                    survivors.end());
+    distances = survivors.size();
+    for (size_t c = 0; c < survivors.size(); ++c) {
+      if (c + kAhead < survivors.size()) __builtin_prefetch(rowOf(survivors[c + kAhead].id));
+      vote(survivors[c].id, survivors[c].partial);
+    }
   } else {
     auto& candidates = scratch.candidates;
     candidates.clear();
     index_.gather(f, id_limit, counters, candidates);
-    // Candidates are scattered over the whole database, so each check waits for memory. Two
-    // passes keep many loads in flight: the first 64 bits of candidates a few steps ahead are
-    // requested while one is checked, then the rest of the survivors likewise.
-    constexpr size_t kAhead = 16;
+    // Candidates are scattered over the whole database, so each check waits for memory: the rows of
+    // candidates a few steps ahead are requested while one is checked. A candidate that passes early
+    // termination (and was not met already through another table) is finished at once, its row
+    // still in the nearest cache: the same votes, in the same order, as checking all first.
     n_candidates = candidates.size();
+    scratch.met.clear(n_candidates);
     for (size_t c = 0; c < n_candidates; ++c) {
-      if (c + kAhead < n_candidates) __builtin_prefetch(&heads_[candidates[c + kAhead]]);
+      if (c + kAhead < n_candidates) __builtin_prefetch(rowOf(candidates[c + kAhead]));
       const FeatureId id = candidates[c];
-      const int partial = popcount64(f.words[0] ^ heads_[id]);
+      const int partial = popcount64(f.words[0] ^ *rowOf(id));
       if (partial > tp) continue;
-      survivors.push_back({id, partial});
+      ++passed;
+      if (!scratch.met.insert(id)) continue;
+      ++distances;
+      vote(id, partial);
     }
   }
-  stats.early_rejections += n_candidates - survivors.size();
-  scratch.met.clear(survivors.size());
-  const size_t passed = survivors.size();
-  survivors.erase(std::remove_if(survivors.begin(), survivors.end(),
-                                 [&](const IndexScratch::Survivor& s) { return !scratch.met.insert(s.id); }),
-                  survivors.end());
-  stats.repeated_candidates += passed - survivors.size();
-  stats.full_distances += survivors.size();
-  const size_t tail_words = kTailWords > 0 ? static_cast<size_t>(kTailWords) : static_cast<size_t>(tail_words_);
-  const uint64_t* tails = tails_.data();
-  const uint64_t* rest = f.words.data() + 1;
-  constexpr size_t kAhead = 16;
-  for (size_t c = 0; c < survivors.size(); ++c) {
-    if (c + kAhead < survivors.size()) __builtin_prefetch(tails + survivors[c + kAhead].id * tail_words);
-    const auto [id, partial] = survivors[c];
-    const uint64_t* tail = tails + id * tail_words;
-    const int d = partial + (kTailWords > 0 ? hammingWords<kTailWords>(rest, tail)
-                                            : hammingWords(rest, tail, static_cast<int>(tail_words)));
-    if (d <= d0) votes.push_back({id, 0, phi_(d)});
-  }
+  stats.early_rejections += n_candidates - passed;
+  stats.repeated_candidates += passed - distances;
+  stats.full_distances += distances;
   stats.buckets_probed += counters.buckets_probed;
   stats.candidates_visited += counters.entries_visited;
 }
@@ -294,9 +296,9 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
         const int d = fullDistance(f, id);
         if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
       }
-    } else if (tail_words_ == 3) {  // ORB, BRIEF: 256 bits
+    } else if (row_words_ == 4) {  // ORB, BRIEF: 256 bits
       indexVotes<3>(f, id_limit, scratch, feature_votes, stats);
-    } else if (tail_words_ == 7) {  // BRISK, FREAK, AKAZE: up to 512 bits
+    } else if (row_words_ == 8) {  // BRISK, FREAK, AKAZE: up to 512 bits
       indexVotes<7>(f, id_limit, scratch, feature_votes, stats);
     } else {
       indexVotes<0>(f, id_limit, scratch, feature_votes, stats);
@@ -355,7 +357,7 @@ QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, 
 }
 
 size_t KeyframeDatabase::memoryBytes() const {
-  return index_.memoryBytes() + heads_.capacity() * sizeof(uint64_t) + tails_.capacity() * sizeof(uint64_t) +
+  return index_.memoryBytes() + rows_.capacity() * sizeof(uint64_t) +
          keyframe_offsets_.capacity() * sizeof(FeatureId) + block_keyframe_.capacity() * sizeof(KeyframeIndex);
 }
 
