@@ -29,6 +29,7 @@ struct CandidateParams {
   int max_candidates = 3;
   int suppression_radius = 5;
   double min_probability = 0.0;
+  int other_maps_per_keyframe = 1;
 
   static constexpr const char* kSection = "detector";
   template <class Self, class Visit>
@@ -57,6 +58,12 @@ struct CandidateParams {
       "Candidates below this (calibrated) loop probability are not reported. 0 reports every keyframe's best "
       "candidates, which precision-recall evaluation needs; for a hard decision use LoopCandidate.accepted "
       "(scoring/decision_probability).");
+    v("other_maps_per_keyframe", p.other_maps_per_keyframe, Bounds::atLeast(1).orZero(),
+      "Several robots (RobotTeam): each keyframe is looked up in its robot's own map and in this many of the other "
+      "robots' maps, taken in turn (0 = every map), so that with R robots each other map is asked every "
+      "(R - 1) / other_maps_per_keyframe keyframes and the work per keyframe stays that of 1 + "
+      "other_maps_per_keyframe queries however large the team. A revisit lasts many keyframes: it is still found, "
+      "a few keyframes later. With two robots 1 asks every map. docs/multi_robot.md measures both.");
   }
   void validate() const { validateDeclared(*this); }
 };

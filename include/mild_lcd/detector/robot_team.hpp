@@ -2,8 +2,9 @@
 
 // Several robots, one map. Each robot's keyframes go into a LoopDetector of their own: its sessions,
 // temporal exclusion, near-past band and temporal filter are the robot's, so every robot's own loops
-// are found exactly as a lone detector finds them. Each keyframe is also looked up in every other
-// robot's map, through a temporal filter per ordered pair of robots (robot A's keyframes against
+// are found exactly as a lone detector finds them. Each keyframe is also looked up in other robots'
+// maps (detector/other_maps_per_keyframe of them, in turn: the work per keyframe does not grow with
+// the team), through a temporal filter per ordered pair of robots (robot A's keyframes against
 // robot B's map): the filter's motion model needs neighbouring map entries to be neighbouring places
 // and its queries to be one robot's consecutive keyframes, which holds within a pair and would not
 // for the robots' keyframes interleaved in one map. The robot's detector runs its one pipeline over
@@ -59,12 +60,17 @@ class RobotTeam {
   void retune(const DetectorParams& next);
   uint64_t retunes() const { return robots_.front()->retunes(); }
 
+  // The other robots whose maps robot's next keyframe will be looked up in
+  // (detector/other_maps_per_keyframe of them, in turn).
+  std::vector<size_t> mapsAskedNext(size_t robot) const;
+
   size_t keyframes() const;
   size_t features() const;
   size_t memoryBytes() const;
 
  private:
-  // The maps robot's keyframes are looked up in besides its own, each through its pair filter.
+  // The maps robot's next keyframe is looked up in besides its own, each through its pair filter:
+  // detector/other_maps_per_keyframe of them, in turn.
   std::vector<OtherMap> otherMaps(size_t robot);
   TemporalFilter& pairFilter(size_t from, size_t to) { return *pair_filters_[from * robots_.size() + to]; }
 

@@ -35,12 +35,28 @@ std::optional<size_t> RobotTeam::find(const std::string& name) const {
   return std::nullopt;
 }
 
-std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
+std::vector<size_t> RobotTeam::mapsAskedNext(size_t robot) const {
   if (robot >= robots_.size()) throw InvalidInput("no robot " + std::to_string(robot));
+  const size_t n_others = robots_.size() - 1;
+  const size_t per_keyframe = static_cast<size_t>(params().candidates.other_maps_per_keyframe);
+  const size_t asked = per_keyframe == 0 ? n_others : std::min(per_keyframe, n_others);
+  // In turn: the robot's n-th keyframe asks the other maps n * asked, n * asked + 1, ... (mod their
+  // number), so that each is asked equally often and at regular intervals, which the pair filter's
+  // motion model (a revisit moves along the other map by a bounded step per query) tolerates.
+  const size_t first = asked == n_others ? 0 : (robots_[robot]->size() * asked) % n_others;
+  std::vector<size_t> maps;
+  for (size_t j = 0; j < asked; ++j) {
+    size_t other = (first + j) % n_others;
+    if (other >= robot) ++other;  // the other robots, skipping this one
+    maps.push_back(other);
+  }
+  return maps;
+}
+
+std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
   std::vector<OtherMap> others;
-  for (size_t other = 0; other < robots_.size(); ++other) {
-    if (other != robot)
-      others.push_back({robots_[other].get(), &pairFilter(robot, other), static_cast<uint32_t>(other)});
+  for (size_t other : mapsAskedNext(robot)) {
+    others.push_back({robots_[other].get(), &pairFilter(robot, other), static_cast<uint32_t>(other)});
   }
   return others;
 }
