@@ -287,6 +287,60 @@ TEST(MihIndex, QueryBudgetReadsShortestBucketsFirstAndNewestEntries) {
   }
 }
 
+// Reading ahead (locate several features, prepare the next, read this one: what a database query
+// does) gives every feature the ids gather() gives, in the same order, with the same counts; over
+// settled runs, rooms, chains, bounded buckets and a budget that some features exhaust.
+TEST(MihIndex, PlannedReadsGiveWhatProbingGives) {
+  std::mt19937_64 rng(35);
+  MihParams p = uncapped(16, 0);
+  p.max_bucket_entries = 8;
+  p.max_candidates_per_feature = 24;
+  MihIndex index(p, kOrbBits);
+  // A few hundred keyframes of near-copies of 40 places, so that buckets fill, get trimmed, merge.
+  std::vector<Descriptor> places;
+  for (int i = 0; i < 40; ++i) places.push_back(test::randomDescriptor(rng));
+  FeatureId next = 0;
+  for (int k = 0; k < 300; ++k) {
+    std::vector<Descriptor> keyframe;
+    for (int i = 0; i < 20; ++i) {
+      Descriptor d = places[(k + i) % places.size()];
+      for (int f = 0; f < 6; ++f) d.flip(static_cast<int>(rng() % kOrbBits));
+      keyframe.push_back(d);
+    }
+    index.insertKeyframe(keyframe.data(), keyframe.size(), next);
+    next += static_cast<FeatureId>(keyframe.size());
+  }
+  ASSERT_TRUE(index.hasQueryBudget());
+  std::vector<Descriptor> queries;
+  for (int i = 0; i < 40; ++i) {
+    Descriptor d = places[static_cast<size_t>(i)];
+    d.flip(static_cast<int>(rng() % kOrbBits));
+    queries.push_back(d);
+  }
+  const FeatureId limit = next - 100;  // the newest entries are past the limit
+  MihIndex::ProbePlan plans[3];
+  ProbeCounters located, planned_counters;
+  index.locate(queries[0], located, plans[0]);
+  index.locate(queries[1], located, plans[1]);
+  index.prepare(plans[0]);
+  size_t exhausted = 0;
+  for (size_t i = 0; i < queries.size(); ++i) {
+    if (i + 2 < queries.size()) index.locate(queries[i + 2], located, plans[(i + 2) % 3]);
+    if (i + 1 < queries.size()) index.prepare(plans[(i + 1) % 3]);
+    std::vector<FeatureId> probed, planned;
+    ProbeCounters probe_counters;
+    index.gather(queries[i], limit, probe_counters, probed);
+    const uint64_t before = planned_counters.entries_visited;
+    index.gatherPlanned(plans[i % 3], limit, planned_counters, planned);
+    ASSERT_EQ(planned, probed) << "query feature " << i;
+    EXPECT_EQ(planned_counters.entries_visited - before, probe_counters.entries_visited);
+    exhausted += probed.size() == 24;
+  }
+  EXPECT_EQ(located.buckets_probed, 16u * queries.size());
+  EXPECT_GT(exhausted, 0u) << "no query feature reached the budget";
+  EXPECT_GT(index.evictedEntries(), 0u);
+}
+
 // The budget is per 16 tables: BRISK's 32 tables read twice as many entries as ORB's 16.
 TEST(MihIndex, QueryBudgetScalesWithTheTableCount) {
   std::mt19937_64 rng(34);

@@ -129,6 +129,32 @@ class MihIndex {
     probe(q, id_limit, counters, [&out](FeatureId id, int) { out.push_back(id); });
   }
 
+  // probe() with a query budget, in three steps, so that a caller with many query features can
+  // overlap one feature's memory reads with another's work: locate() finds the feature's buckets and
+  // requests their headers from memory, prepare() (a little later) reads their lengths and requests
+  // their newest entries, gatherPlanned() (later still) appends the same ids as gather(), in the same
+  // order. A bucket's header and its entries each cost a read from memory per table; requested one
+  // feature at a time, the 16 tables' reads overlapped only each other (docs/speed.md, "Reads
+  // requested ahead"). Only for an index with a query budget (hasQueryBudget()).
+  class ProbePlan {
+    friend class MihIndex;
+    struct Bucket {
+      uint32_t length;
+      uint32_t slot;
+      int t;
+      const void* shard;
+    };
+    std::vector<Bucket> buckets_;
+    uint64_t total_ = 0;
+  };
+  bool hasQueryBudget() const { return query_budget_ > 0; }
+  void locate(const Descriptor& q, ProbeCounters& counters, ProbePlan& plan) const;
+  void prepare(ProbePlan& plan) const;
+  void gatherPlanned(const ProbePlan& plan, FeatureId id_limit, ProbeCounters& counters,
+                     std::vector<FeatureId>& out) const {
+    readPlanned<false>(plan, id_limit, counters, [&out](FeatureId id, uint64_t, int) { out.push_back(id); });
+  }
+
   // True when substring t of a and b are within the probe radius, i.e. the pair meets in table t.
   bool meetsInTable(const Descriptor& a, const Descriptor& b, int t) const;
 
@@ -205,6 +231,8 @@ class MihIndex {
   void probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
   template <bool kPrefixes, class Visit>
   void probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  template <bool kPrefixes, class Visit>
+  void readPlanned(const ProbePlan& plan, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
   void merge(Shard& shard);
   // Merges the shards waiting in merge_queue_, oldest first, up to kMergeBudget entries moved (at
   // least one shard); all of them while merges are deferred.
@@ -320,33 +348,22 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
 template <bool kPrefixes, class Visit>
 void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters,
                                  Visit&& visit) const {
-  // The buckets of one query feature, shortest first: a short bucket is a distinctive substring
-  // (high IDF, and what finds an old place); the longest ones are what grows with the map.
-  struct Bucket {
-    uint32_t length;
-    uint32_t slot;
-    int t;
-    const Shard* shard;
-  };
-  thread_local std::vector<Bucket> buckets;
-  buckets.clear();
-  forEachProbedBucket(q, counters, [](const Shard& shard, uint32_t slot, int t) {
-    buckets.push_back({0, slot, t, &shard});
-  });
-  uint64_t total = 0;
-  for (Bucket& b : buckets) {
-    const Shard& shard = *b.shard;
-    const Slot& s = shard.slots[b.slot];
-    b.length = s.recent == kDiscarded ? 0 : s.count;
-    total += b.length;
-    if (b.length > 0 && s.end > s.offset) {
-      __builtin_prefetch(shard.ids.data() + s.end - 1);  // read newest first, from the run's end
-      if constexpr (kPrefixes) __builtin_prefetch(shard.prefixes.data() + s.end - 1);
-    }
-  }
+  thread_local ProbePlan plan;
+  locate(q, counters, plan);
+  prepare(plan);
+  readPlanned<kPrefixes>(plan, id_limit, counters, visit);
+}
+
+template <bool kPrefixes, class Visit>
+void MihIndex::readPlanned(const ProbePlan& plan, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
+  // The buckets of one query feature, shortest first when they do not all fit (prepare() sorted
+  // them): a short bucket is a distinctive substring (high IDF, and what finds an old place); the
+  // longest ones are what grows with the map.
   uint32_t budget = query_budget_;
-  const auto read = [&](const Bucket& b) {
-    const Shard& shard = *b.shard;
+  for (const ProbePlan::Bucket& b : plan.buckets_) {
+    if (budget == 0) break;
+    if (b.length == 0) continue;
+    const Shard& shard = *static_cast<const Shard*>(b.shard);
     const Slot& s = shard.slots[b.slot];
     for (uint32_t link = s.recent; link != kNone && budget > 0; link = shard.recent[link].next) {
       const Link& l = shard.recent[link];
@@ -366,18 +383,6 @@ void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeC
         visit(ids[e - 1], uint64_t{0}, b.t);
       }
     }
-  };
-  if (total <= budget) {  // everything fits (small maps): the order does not matter
-    for (const Bucket& b : buckets) {
-      if (b.length > 0) read(b);
-    }
-    return;
-  }
-  std::sort(buckets.begin(), buckets.end(),
-            [](const Bucket& a, const Bucket& b) { return a.length != b.length ? a.length < b.length : a.t < b.t; });
-  for (const Bucket& b : buckets) {
-    if (budget == 0) break;
-    if (b.length > 0) read(b);
   }
 }
 

@@ -121,8 +121,9 @@ class KeyframeDatabase {
   // with the tails' word count known at compile time where it can be (kTailWords 0: read at run
   // time), so that ORB's and BRISK's distances are unrolled loops.
   template <int kTailWords>
+  // `plan`: its buckets located and prepared ahead (MihIndex::ProbePlan), or null to probe here.
   void indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch, std::vector<Vote>& votes,
-                  QueryStats& stats) const;
+                  QueryStats& stats, const MihIndex::ProbePlan* plan) const;
 
   DatabaseParams params_;
   SimilarityParams similarity_;

@@ -302,6 +302,35 @@ void MihIndex::merge(Shard& shard) {
   }
 }
 
+void MihIndex::locate(const Descriptor& q, ProbeCounters& counters, ProbePlan& plan) const {
+  plan.buckets_.clear();
+  forEachProbedBucket(q, counters, [&plan](const Shard& shard, uint32_t slot, int t) {
+    plan.buckets_.push_back({0, slot, t, &shard});
+  });
+}
+
+void MihIndex::prepare(ProbePlan& plan) const {
+  uint64_t total = 0;
+  for (ProbePlan::Bucket& b : plan.buckets_) {
+    const Shard& shard = *static_cast<const Shard*>(b.shard);
+    const Slot& s = shard.slots[b.slot];
+    b.length = s.recent == kDiscarded ? 0 : s.count;
+    total += b.length;
+    if (b.length == 0) continue;
+    if (s.recent != kNone) __builtin_prefetch(&shard.recent[s.recent]);  // the newest entries are read first
+    if (s.end > s.offset) {
+      __builtin_prefetch(shard.ids.data() + s.end - 1);  // read newest first, from the run's end
+      if (params_.inline_prefixes) __builtin_prefetch(shard.prefixes.data() + s.end - 1);
+    }
+  }
+  plan.total_ = total;
+  if (total > query_budget_) {  // not everything fits: the shortest buckets first (readPlanned)
+    std::sort(plan.buckets_.begin(), plan.buckets_.end(), [](const ProbePlan::Bucket& a, const ProbePlan::Bucket& b) {
+      return a.length != b.length ? a.length < b.length : a.t < b.t;
+    });
+  }
+}
+
 size_t MihIndex::chainedEntries() const {
   size_t chained = 0;
   for (const Table& table : tables_) {

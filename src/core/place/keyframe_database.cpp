@@ -202,7 +202,7 @@ QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_li
 
 template <int kTailWords>
 void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch,
-                                  std::vector<Vote>& votes, QueryStats& stats) const {
+                                  std::vector<Vote>& votes, QueryStats& stats, const MihIndex::ProbePlan* plan) const {
   const SimilarityParams& sp = similarity_;
   const int d0 = sp.max_distance;
   const int tp = sp.early_termination_threshold;
@@ -241,7 +241,11 @@ void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, Index
   } else {
     auto& candidates = scratch.candidates;
     candidates.clear();
-    index_.gather(f, id_limit, counters, candidates);
+    if (plan != nullptr) {
+      index_.gatherPlanned(*plan, id_limit, counters, candidates);
+    } else {
+      index_.gather(f, id_limit, counters, candidates);
+    }
     // Candidates are scattered over the whole database, so each check waits for memory: the rows of
     // candidates a few steps ahead are requested while one is checked. A candidate that passes early
     // termination (and was not met already through another table) is finished at once, its row
@@ -288,7 +292,25 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   vote_end.reserve(q.size());
   std::vector<Vote> feature_votes;
   IndexScratch scratch;
-  for (const Descriptor& f : q) {
+  // With a query budget the index is read in three steps (MihIndex::ProbePlan): the buckets of the
+  // feature two ahead are located, those of the next one prepared, while this one's are read, so that
+  // each step finds what it reads already requested from memory.
+  const bool planned = mode == SearchMode::kIndex && index_.hasQueryBudget() && !index_.params().inline_prefixes;
+  constexpr size_t kPrepareAhead = 2, kLocateAhead = 4, kPlans = kLocateAhead + 1;
+  MihIndex::ProbePlan plans[kPlans];
+  ProbeCounters located;
+  if (planned) {
+    for (size_t i = 0; i < std::min(kLocateAhead, q.size()); ++i) index_.locate(q[i], located, plans[i]);
+    for (size_t i = 0; i < std::min(kPrepareAhead, q.size()); ++i) index_.prepare(plans[i]);
+  }
+  for (size_t i = 0; i < q.size(); ++i) {
+    const Descriptor& f = q[i];
+    const MihIndex::ProbePlan* plan = nullptr;
+    if (planned) {
+      if (i + kLocateAhead < q.size()) index_.locate(q[i + kLocateAhead], located, plans[(i + kLocateAhead) % kPlans]);
+      if (i + kPrepareAhead < q.size()) index_.prepare(plans[(i + kPrepareAhead) % kPlans]);
+      plan = &plans[i % kPlans];
+    }
     feature_votes.clear();
     if (mode == SearchMode::kExact) {
       stats.full_distances += id_limit;
@@ -297,11 +319,11 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
         if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
       }
     } else if (row_words_ == 4) {  // ORB, BRIEF: 256 bits
-      indexVotes<3>(f, id_limit, scratch, feature_votes, stats);
+      indexVotes<3>(f, id_limit, scratch, feature_votes, stats, plan);
     } else if (row_words_ == 8) {  // BRISK, FREAK, AKAZE: up to 512 bits
-      indexVotes<7>(f, id_limit, scratch, feature_votes, stats);
+      indexVotes<7>(f, id_limit, scratch, feature_votes, stats, plan);
     } else {
-      indexVotes<0>(f, id_limit, scratch, feature_votes, stats);
+      indexVotes<0>(f, id_limit, scratch, feature_votes, stats, plan);
     }
     // Only votes need their keyframe, and they are few: look it up rather than store it per feature.
     for (Vote& v : feature_votes) v.keyframe = keyframeOf(v.feature);
@@ -309,6 +331,8 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
     votes.insert(votes.end(), feature_votes.begin(), feature_votes.end());
     vote_end.push_back(votes.size());
   }
+
+  stats.buckets_probed += located.buckets_probed;
 
   if (near_past != nullptr) {
     std::vector<uint32_t> matched(n, 0);
@@ -357,8 +381,8 @@ QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, 
 }
 
 size_t KeyframeDatabase::memoryBytes() const {
-  return index_.memoryBytes() + rows_.capacity() * sizeof(uint64_t) +
-         keyframe_offsets_.capacity() * sizeof(FeatureId) + block_keyframe_.capacity() * sizeof(KeyframeIndex);
+  return index_.memoryBytes() + rows_.capacity() * sizeof(uint64_t) + keyframe_offsets_.capacity() * sizeof(FeatureId) +
+         block_keyframe_.capacity() * sizeof(KeyframeIndex);
 }
 
 }  // namespace mild
