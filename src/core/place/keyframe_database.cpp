@@ -293,8 +293,9 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   std::vector<Vote> feature_votes;
   IndexScratch scratch;
   // With a query budget the index is read in three steps (MihIndex::ProbePlan): the buckets of the
-  // feature two ahead are located, those of the next one prepared, while this one's are read, so that
-  // each step finds what it reads already requested from memory.
+  // feature four ahead are located, those of the one two ahead prepared, while this one's are read,
+  // so that each step finds what it reads already requested from memory (one ahead each was no
+  // faster: docs/speed.md, "Reads requested ahead").
   const bool planned = mode == SearchMode::kIndex && index_.hasQueryBudget() && !index_.params().inline_prefixes;
   constexpr size_t kPrepareAhead = 2, kLocateAhead = 4, kPlans = kLocateAhead + 1;
   MihIndex::ProbePlan plans[kPlans];
