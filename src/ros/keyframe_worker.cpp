@@ -3,17 +3,40 @@
 #include <malloc.h>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 
 namespace mild_lcd {
 
 KeyframeWorker::KeyframeWorker(SharedDetector& shared, size_t queue_size, size_t queue_bytes, const InputLimits& limits,
-                               Hooks hooks)
-    : shared_(shared), queue_(queue_size, queue_bytes), limits_(limits), hooks_(std::move(hooks)) {}
+                               Hooks hooks, bool extraction_thread)
+    : shared_(shared),
+      queue_(queue_size, queue_bytes),
+      limits_(limits),
+      hooks_(std::move(hooks)),
+      pipelined_(extraction_thread) {}
 
 KeyframeWorker::~KeyframeWorker() { stop(); }
 
 void KeyframeWorker::start() {
-  if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
+  if (thread_.joinable()) return;
+  if (!pipelined_) {
+    thread_ = std::thread([this] { runOneThread(); });
+    return;
+  }
+  // Stage 1's extractor is built once, from the team's own features/ parameters, rather than taken
+  // from a detector: extractors are not thread-safe, and the detector's serves under the lock. A
+  // copy made once stays the detector's equal: features/ are start-up parameters (retune refuses
+  // them), a load, merge or reset replaces a map but not its parameters, every robot of a team has
+  // the same ones, and the team outlives the worker (the nodelet builds it first).
+  mild::FeatureParams features;
+  {
+    const auto lock = shared_.lock();
+    features = shared_.team->params().features;
+  }
+  extractor_ = mild::makeFeatureExtractor(features);
+  descriptor_bytes_ = features.descriptorBytes();
+  thread_ = std::thread([this] { runDetector(); });
+  extraction_thread_ = std::thread([this] { runExtraction(); });
 }
 
 KeyframeWorker::Pushed KeyframeWorker::push(KeyframeInputPtr input) {
@@ -39,31 +62,124 @@ void KeyframeWorker::reject(const std_msgs::Header& header, const std::string& w
   if (hooks_.warn) hooks_.warn("rejected keyframe (stamp " + std::to_string(header.stamp.toSec()) + "): " + why);
 }
 
+size_t KeyframeWorker::discardHandoff() {
+  std::optional<Staged> discarded;  // released outside the lock
+  {
+    std::lock_guard<std::mutex> lock(handoff_mutex_);
+    discarded.swap(handoff_);
+  }
+  handoff_changed_.notify_all();
+  if (!discarded) return 0;
+  ++discarded_;
+  queue_.done();
+  return 1;
+}
+
 size_t KeyframeWorker::discardPending() {
   const size_t n = queue_.clear();
   discarded_ += n;
-  return n;
+  return n + discardHandoff();
 }
 
 void KeyframeWorker::stop() {
+  // Once stopping_ is set, stage 1 hands nothing over (it counts what it holds as discarded) and
+  // stage 2 takes nothing more: discardPending below empties the hand-off for good.
+  {
+    std::lock_guard<std::mutex> lock(handoff_mutex_);
+    stopping_ = true;
+  }
+  handoff_changed_.notify_all();
   queue_.close();
   discardPending();
+  if (extraction_thread_.joinable()) extraction_thread_.join();
   if (thread_.joinable()) thread_.join();
 }
 
-void KeyframeWorker::run() {
-  if (hooks_.startup) {
-    try {
-      hooks_.startup();
-    } catch (const std::exception&) {
-      // The hook has logged and recorded the failure (shared_.failure): keyframes are refused from
-      // now on, saying why.
-    }
+void KeyframeWorker::startup() {
+  if (!hooks_.startup) return;
+  try {
+    hooks_.startup();
+  } catch (const std::exception&) {
+    // The hook has logged and recorded the failure (shared_.failure): keyframes are refused from
+    // now on, saying why.
   }
+}
+
+void KeyframeWorker::runOneThread() {
+  startup();
   while (auto item = queue_.pop()) {
-    process(**item);
+    process(stage(std::move(*item), nullptr));
     queue_.done();
   }
+}
+
+void KeyframeWorker::runExtraction() {
+  for (;;) {
+    {
+      // The next keyframe is popped once the previous one has gone to the detector: one at most waits
+      // extracted, the rest stay in the queue, where its bounds apply (and the oldest is dropped).
+      std::unique_lock<std::mutex> lock(handoff_mutex_);
+      handoff_changed_.wait(lock, [this] { return stopping_ || !handoff_; });
+      if (stopping_) break;
+    }
+    std::optional<KeyframeInputPtr> item = queue_.pop();
+    if (!item) break;
+    Staged staged = stage(std::move(*item), extractor_.get());
+    {
+      std::lock_guard<std::mutex> lock(handoff_mutex_);
+      if (!stopping_) {
+        handoff_ = std::move(staged);
+        handoff_changed_.notify_all();
+        continue;
+      }
+    }
+    ++discarded_;  // stop() came while it was extracted
+    queue_.done();
+    break;
+  }
+  {
+    std::lock_guard<std::mutex> lock(handoff_mutex_);
+    extraction_done_ = true;
+  }
+  handoff_changed_.notify_all();
+}
+
+void KeyframeWorker::runDetector() {
+  startup();
+  for (;;) {
+    std::optional<Staged> staged;
+    {
+      std::unique_lock<std::mutex> lock(handoff_mutex_);
+      handoff_changed_.wait(lock, [this] { return stopping_ || handoff_ || extraction_done_; });
+      if (stopping_ || !handoff_) break;
+      staged.swap(handoff_);
+    }
+    handoff_changed_.notify_all();  // stage 1 may take the next keyframe
+    process(std::move(*staged));
+    queue_.done();
+  }
+}
+
+KeyframeWorker::Staged KeyframeWorker::stage(KeyframeInputPtr input, const mild::FeatureExtractor* extractor) const {
+  Staged staged;
+  staged.header = input->header();
+  try {
+    staged.observation = input->observe(limits_, staged.image);
+  } catch (const std::exception& e) {
+    staged.error = e.what();
+  }
+  if (staged.observation && extractor) {
+    try {
+      // A copy: the image observation is a few headers, and it is kept should extraction fail.
+      staged.observation = mild::extractFeatures(*staged.observation, *extractor, descriptor_bytes_);
+    } catch (const std::exception&) {
+      // Left as the image: the detector extracts it again under its lock and refuses it as it
+      // always has, with the same message and after the same checks (an id already in use first).
+    }
+  }
+  staged.input = std::move(input);  // the decoded image may point into the message
+  if (hooks_.staged) hooks_.staged(staged.header, staged.observation && !staged.observation->image);
+  return staged;
 }
 
 void KeyframeWorker::refreshSnapshot(const mild::RobotTeam& team) {
@@ -76,11 +192,16 @@ void KeyframeWorker::refreshSnapshot(const mild::RobotTeam& team) {
   stats_.discarded_buckets = discarded_buckets;
 }
 
-void KeyframeWorker::process(const KeyframeInput& input) {
+void KeyframeWorker::process(Staged staged) {
   ProcessedKeyframe out;
+  out.header = staged.header;
+  out.image = std::move(staged.image);
+  if (!staged.observation) {
+    reject(out.header, staged.error);
+    return;
+  }
   try {
-    out.header = input.header();
-    mild::Observation observation = input.observe(limits_, out.image);
+    mild::Observation observation = std::move(*staged.observation);
     const size_t robot = observation.robot;
     const bool keypoints = hooks_.wants_keypoints && hooks_.wants_keypoints();
     const auto lock = shared_.lock();
@@ -139,6 +260,10 @@ WorkerCounters KeyframeWorker::counters() const {
   {
     std::lock_guard<std::mutex> lock(stats_mutex_);
     c = stats_;
+  }
+  {
+    std::lock_guard<std::mutex> lock(handoff_mutex_);
+    c.handed_over = handoff_ ? 1 : 0;
   }
   c.dropped = queue_.dropped();
   c.discarded = discarded_.load();

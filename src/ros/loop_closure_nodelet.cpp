@@ -8,6 +8,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
@@ -117,8 +118,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     InputLimits limits;
     limits.max_image_pixels = static_cast<uint64_t>(settings_.max_image_pixels);
     limits.max_keyframe_features = static_cast<size_t>(settings_.max_keyframe_features);
+    // A second thread gains only where there is a second core to run it.
+    const bool extraction_thread = settings_.extraction_thread && std::thread::hardware_concurrency() > 1;
     worker_ = std::make_unique<KeyframeWorker>(shared_, static_cast<size_t>(settings_.queue_size),
-                                               static_cast<size_t>(settings_.queue_mb) << 20, limits, std::move(hooks));
+                                               static_cast<size_t>(settings_.queue_mb) << 20, limits, std::move(hooks),
+                                               extraction_thread);
 
     transport_ = std::make_unique<image_transport::ImageTransport>(nh);
     debug_pub_ = transport_->advertise("debug_image", 1);
@@ -145,14 +149,15 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
     const mild::DetectorParams& params = shared_.team->params();
     NODELET_INFO(
-        "mild_lcd ready: %s%s%s%s, %s features (%d-byte descriptors), exclusion %d keyframes, "
+        "mild_lcd ready: %s%s%s%s, %s features (%d-byte descriptors%s), exclusion %d keyframes, "
         "verification %s, maps in %s",
         team_names_.empty() ? "" : ("robots " + settings_.robots + ", ").c_str(),
         settings_.use_image_input ? "image" : "",
         settings_.use_image_input && settings_.use_keyframe_input ? " and " : "",
         settings_.use_keyframe_input ? "keyframe input" : "", params.features.type.c_str(),
-        params.features.descriptorBytes(), params.candidates.exclusion_frames,
-        params.verification.enabled ? "on" : "off", robots_.front()->store->directory().c_str());
+        params.features.descriptorBytes(), worker_->extractionThread() ? ", extracted on a thread of their own" : "",
+        params.candidates.exclusion_frames, params.verification.enabled ? "on" : "off",
+        robots_.front()->store->directory().c_str());
     const std::string cost = extractionCostWarning(settings_, params.features.type);
     if (!cost.empty()) NODELET_WARN("%s", cost.c_str());
   }
@@ -230,8 +235,9 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
     autosave_.reset();  // waits for a save in progress; the last save follows
     if (worker_) {
-      const size_t waiting = worker_->counters().queued;
+      const size_t discarded = worker_->counters().discarded;
       worker_->stop();
+      const size_t waiting = worker_->counters().discarded - discarded;  // the queue's and the one extracted
       if (waiting > 0) {
         shutdownMessage(getName(), "shutting down: " + std::to_string(waiting) + " queued keyframes were not processed",
                         true);

@@ -34,6 +34,10 @@ void visitSettings(Settings& s, Visit&& visit) {
         "has the same length)");
   visit("queue_mb", s.queue_mb, Bounds::in(1, 1 << 20),
         "and at most this many megabytes of messages waiting (a message larger than that is rejected)");
+  visit("extraction_thread", s.extraction_thread, Bounds::any(),
+        "decode and extract keyframe k+1 on a thread of its own while keyframe k is queried, verified and stored "
+        "(on a machine of one core, or false: one thread does both, extracting under the detector lock); answers "
+        "keep their order");
   visit("debug_image_cache", s.debug_image_cache, Bounds::in(0, 1000000),
         "keyframes kept at half resolution for `debug_image` (0 = none)");
   visit("debug_image_cache_mb", s.debug_image_cache_mb, Bounds::in(0, 1 << 20),

@@ -14,6 +14,7 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "test_images.hpp"
 
@@ -264,6 +265,67 @@ TEST(RobotTeam, RefusesBadRobotsAndKeepsEveryMapAsItWas) {
   EXPECT_EQ(team.robot(1).params().database.index.num_tables, 0);
   team.reset();
   EXPECT_EQ(team.keyframes(), 0u);
+}
+
+// The ROS worker extracts a keyframe ahead of the detector, on a thread of its own, with
+// extractFeatures and an extractor built from the same parameters: the team answers the extracted
+// observation exactly as it answers the image, and reports the extraction's time.
+TEST(RobotTeam, FeaturesExtractedAheadGiveTheSameAnswersAndTheirExtractionTime) {
+  const std::vector<cv::Mat>& images = test::fixtureFrames();
+  DetectorParams p;
+  p.candidates.exclusion_frames = 8;  // the fixture is every 5th frame
+  RobotTeam direct(p, {""}), ahead(p, {""});
+  const auto extractor = makeFeatureExtractor(p.features);
+  const CameraIntrinsics camera{300.0, 300.0, 160.0, 120.0};
+  size_t candidates = 0, verified = 0;
+  for (size_t i = 0; i < images.size(); ++i) {
+    const Observation image = Observation::ofImage(images[i], PixelFormat::kGray, 0.5 * i, std::nullopt, camera);
+    Observation extracted = extractFeatures(image, *extractor, p.features.descriptorBytes());
+    ASSERT_FALSE(extracted.image.has_value());
+    EXPECT_EQ(extracted.features.camera, camera);
+    EXPECT_GT(extracted.extract_ms, 0.0);
+    const double extract_ms = extracted.extract_ms;
+    const DetectionResult a = direct.process(image);
+    const DetectionResult b = ahead.process(std::move(extracted));
+    EXPECT_EQ(b.stats.extract_ms, extract_ms) << "reported as the detector's own extraction is";
+    EXPECT_GT(a.stats.extract_ms, 0.0);
+    EXPECT_EQ(a.query_id, b.query_id);
+    EXPECT_EQ(a.stats.features, b.stats.features);
+    EXPECT_EQ(a.similarity, b.similarity);
+    ASSERT_EQ(a.candidates.size(), b.candidates.size()) << "keyframe " << i;
+    for (size_t c = 0; c < a.candidates.size(); ++c) {
+      EXPECT_EQ(a.candidates[c].id, b.candidates[c].id);
+      EXPECT_EQ(a.candidates[c].probability, b.candidates[c].probability);
+      EXPECT_EQ(a.candidates[c].accepted, b.candidates[c].accepted);
+      EXPECT_EQ(a.candidates[c].verification.inliers, b.candidates[c].verification.inliers);
+      verified += a.candidates[c].verification.verified ? 1 : 0;
+    }
+    candidates += a.candidates.size();
+  }
+  EXPECT_GT(candidates, 0u);
+  EXPECT_GT(verified, 0u) << "the revisit is verified, with the features' camera";
+
+  // Features pass through unchanged; a width the extractor does not make is refused with the
+  // message the detector gives an image.
+  const Observation features = extractFeatures(Observation::ofFeatures(Features{}, 1.0, 7), *extractor, 32);
+  EXPECT_EQ(features.id, std::optional<uint64_t>(7));
+  EXPECT_EQ(features.extract_ms, 0.0);
+  DetectorParams narrow = p;
+  narrow.features.descriptor_bytes = 16;
+  LoopDetector refuses(narrow);
+  std::string by_detector, ahead_of_it;
+  try {
+    refuses.process(images[0], PixelFormat::kGray, 1.0);
+  } catch (const InvalidInput& e) {
+    by_detector = e.what();
+  }
+  try {
+    extractFeatures(Observation::ofImage(images[0], PixelFormat::kGray, 1.0), *extractor, 16);
+  } catch (const InvalidInput& e) {
+    ahead_of_it = e.what();
+  }
+  EXPECT_NE(by_detector.find("16-byte descriptors"), std::string::npos) << by_detector;
+  EXPECT_EQ(by_detector, ahead_of_it);
 }
 
 }  // namespace

@@ -39,7 +39,8 @@ class RobotTeam {
   const DetectorParams& params() const { return robots_.front()->params(); }
 
   // A keyframe of observation.robot, as LoopDetector::process (its image's features extracted by
-  // that robot's detector), with the other robots' maps asked too: result.query_robot = the robot,
+  // that robot's detector; features extracted ahead by extractFeatures report its extract_ms), with
+  // the other robots' maps asked too: result.query_robot = the robot,
   // each candidate's robot its map's, at most max_candidates in all. Throws InvalidInput (changing
   // nothing) for a robot out of range and whatever the robot's detector refuses.
   DetectionResult process(Observation observation);

@@ -20,6 +20,7 @@ struct NodeSettings {
   bool publish_correspondences = false;
   int queue_size = 100;
   int queue_mb = 256;                 // and at most this many megabytes of messages
+  bool extraction_thread = true;      // extract keyframe k+1 while k is processed (KeyframeWorker)
   int debug_image_cache = 1000;       // keyframes kept (half resolution, grey) for debug_image
   int debug_image_cache_mb = 64;      // and at most this many megabytes of them
   int max_image_pixels = 16777216;    // larger images are refused before decoding (4096 x 4096)

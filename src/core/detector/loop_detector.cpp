@@ -8,6 +8,7 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
+#include "mild_lcd/detector/observation.hpp"
 #include "mild_lcd/params/parameters.hpp"
 
 namespace mild {
@@ -286,18 +287,10 @@ DetectionResult LoopDetector::process(const cv::Mat& image, PixelFormat format, 
                                       std::optional<uint64_t> id, const CameraIntrinsics& camera,
                                       const std::vector<OtherMap>& others, uint32_t robot) {
   checkId(id);
-  if (extractor_->descriptorBytes() != descriptorBytes()) {
-    throw InvalidInput("this detector holds " + std::to_string(descriptorBytes()) +
-                       "-byte descriptors (features/descriptor_bytes) but features/type " + extractor_->name() +
-                       " extracts " + std::to_string(extractor_->descriptorBytes()) +
-                       "-byte ones: give it Keyframes with its descriptors, not images");
-  }
-  const auto start = Clock::now();
-  Features features = extractor_->extract(image, format);
-  features.camera = camera;
-  const double extract_ms = msSince(start);
-  DetectionResult result = process(std::move(features), stamp, id, others, robot);
-  result.stats.extract_ms = extract_ms;
+  Observation extracted =
+      extractFeatures(Observation::ofImage(image, format, stamp, id, camera), *extractor_, descriptorBytes());
+  DetectionResult result = process(std::move(extracted.features), stamp, id, others, robot);
+  result.stats.extract_ms = extracted.extract_ms;
   return result;
 }
 

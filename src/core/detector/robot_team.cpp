@@ -69,8 +69,10 @@ DetectionResult RobotTeam::process(Observation observation) {
     return detector.process(observation.image->pixels, observation.image->format, observation.stamp, observation.id,
                             observation.features.camera, others, static_cast<uint32_t>(robot));
   }
-  return detector.process(std::move(observation.features), observation.stamp, observation.id, others,
-                          static_cast<uint32_t>(robot));
+  DetectionResult result = detector.process(std::move(observation.features), observation.stamp, observation.id, others,
+                                            static_cast<uint32_t>(robot));
+  result.stats.extract_ms = observation.extract_ms;  // extracted ahead (extractFeatures), or 0
+  return result;
 }
 
 void RobotTeam::mapChanged(size_t robot) {
