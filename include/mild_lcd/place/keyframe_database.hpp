@@ -58,9 +58,9 @@ struct DatabaseParams {
 // The keyframe database: descriptors of every inserted keyframe, the MIH index over them, and
 // image similarity by voting. Keyframes are numbered 0, 1, 2, ... in insertion order.
 //
-// Descriptors are stored split: the first 64 bits of every feature in one array and the remaining
-// words (3 for ORB, 7 for BRISK) in another, so that early termination reads 8 bytes per rejected
-// candidate. Every descriptor must have the database's width (DatabaseParams::descriptor_bytes).
+// Descriptors are stored one row per feature (4 words for ORB, 8 for BRISK); early termination
+// looks at a candidate's first word and reads the rest only when it passes, from the same cache
+// line. Every descriptor must have the database's width (DatabaseParams::descriptor_bytes).
 class KeyframeDatabase {
  public:
   explicit KeyframeDatabase(const DatabaseParams& params = {});
