@@ -10,16 +10,22 @@ refitted a few rounds on each query's best candidate under the weights found, be
 candidate whose probability is published first and scored.
 
 Every kind of data weighs the same in the fit, whatever its number of sequences and candidates:
-a kind is a sequence name without a trailing _s<seed> (pub_campus_s7 is a pub_campus), and every
-real-camera sequence (name starting with gp_ or real_) is the kind "real". Inside a kind, each
-sequence weighs the same.
+a kind is a sequence name without a trailing _k<step> (the keyframe step of ../shared/bench/
+subsample.py: pub_city_k5 is pub_city at every 5th frame; no suffix is step 1) and without a
+trailing _s<seed> (pub_campus_s7 is a pub_campus), and every real-camera sequence (name starting
+with gp_ or real_) is the kind "real". Inside a kind, each keyframe step weighs the same, and inside
+a step each sequence.
+
+A candidate that failed verification is published through the verification gate (its probability
+scaled below the decision, candidate_scorer.hpp: belowDecision): the metrics and the choice of each
+query's best candidate here apply it too.
 
 Usage:
-  fit_scoring.py RUN [RUN ...] [--l2 0.01] [--cv] [--json OUT.json]
+  fit_scoring.py RUN [RUN ...] [--l2 0.001] [--cv] [--cv-steps] [--json OUT.json]
 RUN is NAME=SEQUENCE_DIR:DETAILS.csv (SEQUENCE_DIR holds gt_loops.txt). With --cv each kind is left
 out in turn, the scorer fitted on the others and scored on the runs of the kind left out
-(recall@100%P, AP, and precision/recall at probability >= 0.5). Prints the fit on all runs as a
-YAML section.
+(recall@100%P, AP, and precision/recall at probability >= 0.5); with --cv-steps each keyframe step
+likewise. Prints the fit on all runs as a YAML section.
 """
 import json
 import math
@@ -29,10 +35,25 @@ import sys
 import numpy as np
 
 
+def step_of(name):
+    m = re.search(r"_k(\d+)$", name)
+    return int(m.group(1)) if m else 1
+
+
 def kind_of(name):
+    name = re.sub(r"_k\d+$", "", name)
     if name.startswith("gp_") or name.startswith("real_"):
         return "real"
     return re.sub(r"_s\d+$", "", name)
+
+
+WRONG_WEIGHT = 1.0  # --wrong-weight: a wrong candidate counts this many times a right one in the fit
+GATE = 0.5  # the verification gate at the default decision probability (belowDecision)
+
+
+def published(score, verified):
+    p = 1.0 / (1.0 + math.exp(-score))
+    return p if verified else p * GATE
 
 
 def load_gt(seq):
@@ -70,22 +91,26 @@ def load_run(spec, min_gap=40):
             if i - j < min_gap:
                 continue
             label = 1 if (i, j) in truth else (-1 if (i, j) in dont_care else 0)
-            rows.append((i, j, [float(row[c]) for c in columns], label))
-    return {"name": name, "kind": kind_of(name), "rows": rows, "queries": queries, "features": columns}
+            rows.append((i, j, [float(row[c]) for c in columns], label, row.get("verified", "1") == "1"))
+    return {"name": name, "kind": kind_of(name), "step": step_of(name), "rows": rows, "queries": queries,
+            "features": columns}
 
 
 def row_weights(runs, rows_of):
-    """Each kind weighs 1, each of its runs 1 / (runs of the kind), each row of a run equally."""
-    per_kind = {}
+    """Each kind weighs 1, each of its steps 1 / (steps of the kind), each run of a step
+    1 / (runs of the step), each row of a run equally."""
+    steps_of_kind, runs_of_step = {}, {}
     for r in runs:
-        per_kind[r["kind"]] = per_kind.get(r["kind"], 0) + 1
+        steps_of_kind.setdefault(r["kind"], set()).add(r["step"])
+        runs_of_step[(r["kind"], r["step"])] = runs_of_step.get((r["kind"], r["step"]), 0) + 1
     x, y, w = [], [], []
     for r in runs:
         labelled = [row for row in rows_of(r) if row[3] >= 0]
-        for _, _, f, lab in labelled:
+        share = len(steps_of_kind[r["kind"]]) * runs_of_step[(r["kind"], r["step"])]
+        for _, _, f, lab, _ in labelled:
             x.append(f)
             y.append(lab)
-            w.append(1.0 / (len(labelled) * per_kind[r["kind"]]))
+            w.append((1.0 if lab == 1 else WRONG_WEIGHT) / (len(labelled) * share))
     return np.array(x, dtype=float), np.array(y, dtype=float), np.array(w, dtype=float)
 
 
@@ -94,7 +119,7 @@ def best_rows(run, weights, bias):
     acting on the best candidate) sees."""
     best = {}
     for row in run["rows"]:
-        s = bias + float(np.dot(weights, row[2]))
+        s = published(bias + float(np.dot(weights, row[2])), row[4])
         if row[0] not in best or s > best[row[0]][0]:
             best[row[0]] = (s, row)
     return [row for _, row in best.values()]
@@ -126,8 +151,8 @@ def fit_rows(x, y, w, l2):
 
 def metrics(run, weights, bias):
     best = {}
-    for i, _, f, lab in run["rows"]:
-        s = 1.0 / (1.0 + math.exp(-(bias + float(np.dot(weights, f)))))
+    for i, _, f, lab, verified in run["rows"]:
+        s = published(bias + float(np.dot(weights, f)), verified)
         if i not in best or s > best[i][0]:
             best[i] = (s, lab)
     ranked = sorted(best.values(), key=lambda v: -v[0])
@@ -155,17 +180,23 @@ def metrics(run, weights, bias):
 
 def main():
     args = sys.argv[1:]
-    l2 = 0.01
+    l2 = 0.001
     if "--l2" in args:
         l2 = float(args[args.index("--l2") + 1])
         args.remove(args[args.index("--l2") + 1])
         args.remove("--l2")
+    global WRONG_WEIGHT
+    if "--wrong-weight" in args:
+        WRONG_WEIGHT = float(args[args.index("--wrong-weight") + 1])
+        args.remove(args[args.index("--wrong-weight") + 1])
+        args.remove("--wrong-weight")
     json_out = None
     if "--json" in args:
         json_out = args[args.index("--json") + 1]
         args.remove(json_out)
         args.remove("--json")
     cv = "--cv" in args
+    cv_steps = "--cv-steps" in args
     specs = [a for a in args if not a.startswith("--")]
     if not specs:
         sys.exit(__doc__)
@@ -182,6 +213,17 @@ def main():
                 m = metrics(r, w, b)
                 report["cv"].append({"kind": kind, "run": r["name"], **m})
                 print(f"| {kind} | {r['name']} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | "
+                      f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} |")
+    if cv_steps:
+        print("| left out step | run | recall@100%P | AP | precision at p >= 0.5 | recall at p >= 0.5 |")
+        print("|---|---|---|---|---|---|")
+        report["cv_steps"] = []
+        for step in sorted({r["step"] for r in runs}):
+            w, b = fit([r for r in runs if r["step"] != step], l2)
+            for r in (r for r in runs if r["step"] == step):
+                m = metrics(r, w, b)
+                report["cv_steps"].append({"step": step, "run": r["name"], **m})
+                print(f"| {step} | {r['name']} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | "
                       f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} |")
     w, b = fit(runs, l2)
     report["weights"] = [round(float(v), 3) for v in w]

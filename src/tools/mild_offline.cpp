@@ -105,7 +105,7 @@ int run(const Options& opt) {
     details.open(opt.details);
     if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
     details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
-               "homography_share,verified,accepted,near_past,fit_skipped";
+               "homography_share,verified,accepted,near_past,fit_skipped,eligible,saliency,reported";
     // The scorer's feature vector, as it computes it: scripts/fit_scoring.py fits on these columns.
     for (const std::string& name : mild::CandidateScorer::featureNames()) details << "," << name;
     details << "\n";
@@ -135,21 +135,26 @@ int run(const Options& opt) {
     verify_ms.push_back(r.stats.verify_ms);
     keyframe_ms.push_back(r.stats.extract_ms + r.stats.query_ms + r.stats.filter_ms + r.stats.verify_ms);
     features += r.stats.features;
+    const auto writeDetails = [&](const mild::LoopCandidate& c, bool reported) {
+      const mild::Verification& v = c.verification;
+      details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
+              << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
+              << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
+              << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "," << (v.fit_skipped ? 1 : 0)
+              << "," << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0);
+      for (double x : detector.scorer().features(mild::LoopDetector::evidenceOf(c), v)) details << "," << x;
+      details << "\n";
+    };
     for (const mild::LoopCandidate& c : r.candidates) {
       // Every candidate with its published probability: one that failed verification keeps a
       // (low) probability, which ranks it below the verified ones.
       csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
       if (c.verification.pose.valid) estimated.push_back({i, c.id, c.verification.pose});
-      if (details.is_open()) {
-        const mild::Verification& v = c.verification;
-        details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
-                << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << ","
-                << v.inliers << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << ","
-                << (v.verified ? 1 : 0) << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << ","
-                << (v.fit_skipped ? 1 : 0);
-        for (double x : mild::CandidateScorer::features(c.filter_probability, v)) details << "," << x;
-        details << "\n";
-      }
+      if (details.is_open()) writeDetails(c, true);
+    }
+    // Training data: the candidates judged but not reported (beyond detector/max_candidates) too.
+    if (details.is_open() && opt.fit_every_candidate) {
+      for (const mild::LoopCandidate& c : r.unreported) writeDetails(c, false);
     }
     if (!similarity_matrix.empty()) {
       // Row = query frame, column = candidate frame (ids are frame indices).
@@ -286,8 +291,9 @@ int main(int argc, char** argv) {
                  "pairs closer than this many frames are ignored when scoring (EVALUATION.md: 40)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--fit-every-candidate", opt.fit_every_candidate,
-               "verification/early_stop off: every candidate's model fitted, as scripts/fit_scoring.py needs in "
-               "--details (each keyframe's best candidate, and what is accepted, are the same either way)");
+               "verification/early_stop off: every candidate's model fitted, and --details lists the candidates judged "
+               "beyond detector/max_candidates too (column reported 0), as scripts/fit_scoring.py needs (each "
+               "keyframe's best candidate, and what is accepted, are the same either way)");
   app.add_option("--scale", opt.scale,
                  "resize every frame by this factor before detection (speed at other image sizes, e.g. 2 for 640 x 480 "
                  "from 320 x 240)")

@@ -108,24 +108,37 @@ Candidate mihCandidates(const KeyframeDatabase& db) {
   };
 }
 
-// The near-past policy on its own (near_past.hpp): the band reaches back while the matched counts
-// stay above the background's median + kappa MADs, tolerating `tolerance` keyframes below in a row,
-// never below `floor`, and covers the whole session while there is no background.
-TEST(NearPastBand, ExtendsWhileAboveTheBackground) {
+// The near-past policy on its own (near_past.hpp): walking back from the limit, the band goes on
+// while the matched count stays within rise x sqrt(valley) of the valley (the fewest matched between
+// the keyframe and the query, the exclusion window [limit, end) included), never below `floor`.
+TEST(NearPastBand, FollowsTheViewContinuousWithThePresent) {
+  // 100 keyframes stored, the exclusion window is 80..99. The view fades from 400 matched features
+  // (the newest keyframe) to 100 at keyframe 60 and ends there: older keyframes match 0-2.
   std::vector<uint32_t> matched(100);
-  for (size_t k = 0; k < matched.size(); ++k) matched[k] = 10 + static_cast<uint32_t>(k % 3);  // background 10-12
-  for (size_t k = 95; k < 100; ++k) matched[k] = 50;                                           // the place being left
-  matched[93] = 50;  // beyond two below-level keyframes: tolerated (tolerance 2)
+  for (size_t k = 0; k < matched.size(); ++k) matched[k] = k % 3;
+  for (size_t k = 60; k < 100; ++k) matched[k] = static_cast<uint32_t>(100 + (k - 60) * 300 / 39);
   NearPastRule rule;
-  EXPECT_EQ(nearPastBand(matched, 100, rule), 7u);
-  rule.tolerance = 0;
-  EXPECT_EQ(nearPastBand(matched, 100, rule), 5u) << "no keyframe below the level tolerated";
-  rule.floor = 97;
-  EXPECT_EQ(nearPastBand(matched, 100, rule), 3u) << "never below the session's start";
+  EXPECT_EQ(nearPastBand(matched, 80, rule), 20u) << "80 down to 60: the fading view; then it ends at once";
+  rule.floor = 70;
+  EXPECT_EQ(nearPastBand(matched, 80, rule), 10u) << "never below the session's start";
   rule = NearPastRule{};
-  EXPECT_EQ(nearPastBand(matched, 20, rule), 20u) << "fewer than min_background eligible: all of the session";
-  std::vector<uint32_t> flat(100, 10);
-  EXPECT_EQ(nearPastBand(flat, 100, rule), 0u) << "nothing above the background";
+  // A revisit right at the limit: the window's valley (the view had faded to the chance level, 20,
+  // by keyframe 82) separates it from the present.
+  std::vector<uint32_t> revisit(100, 20);
+  for (size_t k = 95; k < 100; ++k) revisit[k] = 300;  // the present
+  for (size_t k = 76; k < 82; ++k) revisit[k] = 120;   // the place seen again, keyframes 76..81
+  EXPECT_EQ(nearPastBand(revisit, 80, rule), 0u) << "the first eligible keyframe is a revisit, a candidate at once";
+  std::vector<uint32_t> first(100, 20);
+  for (size_t k = 95; k < 100; ++k) first[k] = 300;
+  first[0] = 120;  // keyframe 0, the only eligible one, revisited
+  EXPECT_EQ(nearPastBand(first, 1, rule), 0u) << "however few keyframes are eligible";
+  // A window whose valley is within its own spread of zero: the present's view had ended there.
+  std::vector<uint32_t> faded(100, 3);
+  for (size_t k = 95; k < 100; ++k) faded[k] = 300;
+  EXPECT_EQ(nearPastBand(faded, 80, rule), 0u) << "keyframes that show neither place are not the near past";
+  // No exclusion window: the newest keyframe is the present's nearest neighbour.
+  EXPECT_EQ(nearPastBand(matched, 100, rule), 40u);
+  EXPECT_EQ(nearPastBand(matched, 0, rule), 0u);
 }
 
 TEST(KeyframeDatabase, IndexSimilarityEqualsTheFormulaOverTheCandidateSet) {
@@ -446,7 +459,7 @@ SharedView sharedView(KeyframeIndex first, KeyframeIndex count) {
 
 TEST(NearPast, KeyframesStillSharingTheViewUpToTheLimitAreLeftOut) {
   // Keyframes 255..299 see the query's place: the limit (the fixed exclusion) is 280, so 255..279
-  // are the near past, contiguous with the present.
+  // are the near past, contiguous with the present through the exclusion window.
   SharedView v = sharedView(255, 45);
   NearPastRule rule;
   const QueryResult r = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
@@ -471,14 +484,36 @@ TEST(NearPast, ARevisitSeparatedFromThePresentStaysACandidate) {
   EXPECT_LT(best, 125);
 }
 
-TEST(NearPast, NeverReachesIntoAnEarlierSessionAndNeedsABackground) {
+TEST(NearPast, ARevisitAtTheFirstEligibleKeyframeStaysACandidate) {
+  // Keyframes 270..279 show the query's place and the exclusion window 280..299 does not: a revisit
+  // that reaches the limit (a low keyframe rate), not the near past.
+  SharedView v = sharedView(270, 10);
+  NearPastRule rule;
+  const QueryResult r = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
+  EXPECT_EQ(r.near_past, 0u);
+  const auto best = std::max_element(r.similarity.begin(), r.similarity.end()) - r.similarity.begin();
+  EXPECT_GE(best, 270);
+}
+
+TEST(NearPast, NeverReachesIntoAnEarlierSession) {
   SharedView v = sharedView(200, 100);  // everything from 200 on shares the view
   NearPastRule rule;
   rule.floor = 240;  // keyframes below 240 come from an earlier session
   const QueryResult r = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
-  EXPECT_EQ(r.near_past, 40u) << "the whole current session is the present (its 40 are above min_background)";
-  rule.floor = 270;  // 10 keyframes of this session eligible: fewer than min_background (30)
-  EXPECT_EQ(v.db.query(v.query, 280, SearchMode::kIndex, &rule).near_past, 10u);
+  EXPECT_EQ(r.near_past, 40u) << "the whole current session is the present";
+  rule.floor = 279;  // one keyframe of this session eligible: no warm-up, the band is measured as ever
+  EXPECT_EQ(v.db.query(v.query, 280, SearchMode::kIndex, &rule).near_past, 1u);
+}
+
+// Reading the exclusion window for the band leaves the eligible keyframes' votes as they were, with
+// a query budget too (the window's ids are read besides it).
+TEST(NearPast, TheWindowIsReadBesidesTheBudget) {
+  SharedView v = sharedView(100, 25);
+  NearPastRule rule;
+  const QueryResult with = v.db.query(v.query, 280, SearchMode::kIndex, &rule);
+  const QueryResult without = v.db.query(v.query, 280);
+  ASSERT_EQ(with.near_past, 0u);
+  EXPECT_EQ(with.similarity, without.similarity);
 }
 
 }  // namespace

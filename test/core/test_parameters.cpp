@@ -66,7 +66,7 @@ TEST(Parameters, BoundsComeFromTheDeclarationAndNameTheParameter) {
   // The runtime set is what the declarations mark, and only candidate, verification and scoring
   // parameters are in it.
   const auto& runtime = runtimeParameterNames();
-  EXPECT_EQ(runtime.size(), 10u);
+  EXPECT_EQ(runtime.size(), 11u);
   for (const std::string& name : runtime) {
     EXPECT_TRUE(name.rfind("detector/", 0) == 0 || name.rfind("verification/", 0) == 0 ||
                 name.rfind("scoring/", 0) == 0)

@@ -25,6 +25,7 @@ const std::map<std::string, std::string> kChangedValues = {
     {"detector/max_candidates", "1"},
     {"detector/suppression_radius", "40"},
     {"detector/min_probability", "0.5"},
+    {"detector/similarity_candidates", "0"},  // only the filter's candidates are judged
     {"scoring/decision_probability", "0.95"},
     {"verification/ransac_threshold", "0.3"},
     {"verification/min_inliers", "60"},

@@ -23,10 +23,9 @@ struct CandidateParams {
   int exclusion_frames = 40;
   double exclusion_seconds = 0.0;
   bool near_past = true;
-  double near_past_kappa = 2.0;
-  int near_past_tolerance = 2;
-  int near_past_min_background = 30;
+  double near_past_rise = 3.0;
   int max_candidates = 3;
+  int similarity_candidates = 2;
   int suppression_radius = 5;
   double min_probability = 0.0;
   int other_maps_per_keyframe = 1;
@@ -41,19 +40,27 @@ struct CandidateParams {
     v("exclusion_seconds", p.exclusion_seconds, Bounds::atLeast(0).runtime(),
       "When > 0, also those fewer than this many seconds before the query.");
     v("near_past", p.near_past, Bounds::any(),
-      "The near-past band: beyond the exclusion, the newest keyframes that still share the query's view (far "
-      "buildings seen while walking towards them) are excluded too, as far back as the number of query features "
-      "matched in them stays above the background level of older keyframes (median + near_past_kappa x 1.4826 "
-      "MAD over the newest 400 eligible ones).");
-    v("near_past_kappa", p.near_past_kappa, Bounds::atLeast(0), "The band's threshold above the background, in MADs.");
-    v("near_past_tolerance", p.near_past_tolerance, Bounds::atLeast(0),
-      "Keyframes below the level allowed in a row before the band ends.");
-    v("near_past_min_background", p.near_past_min_background, Bounds::atLeast(1),
-      "Until this many keyframes of the session are eligible there is no background, and none is a candidate.");
+      "The near-past band: beyond the exclusion, the newest keyframes whose view is still continuous with the "
+      "query's (far buildings seen while walking towards them, a slow camera at a high keyframe rate) are "
+      "excluded too. Walking back from the newest eligible keyframe, the band goes on while the number of query "
+      "features matched in the keyframe does not rise out of the valley, the fewest matched in any keyframe "
+      "between it and the query (the exclusion window included): a revisit is separated from the present by "
+      "keyframes that show neither place. No background and no warm-up: a revisit at the first eligible "
+      "keyframe is a candidate at once (place/near_past.hpp).");
+    v("near_past_rise", p.near_past_rise, Bounds::atLeast(0),
+      "How far a keyframe's matched count must rise above the valley to end the band, in units of the "
+      "valley's square root (the spread of a count). Chosen by cross-validation over kinds and keyframe steps "
+      "(docs/accuracy.md).");
     v("max_candidates", p.max_candidates, Bounds::atLeast(1).runtime(),
-      "Up to this many candidates per keyframe, local maxima of the loop probability at least suppression_radius "
-      "keyframes apart, best first.");
-    v("suppression_radius", p.suppression_radius, Bounds::atLeast(0).runtime(), "See max_candidates.");
+      "Up to this many candidates per keyframe are reported, best first by their published probability.");
+    v("similarity_candidates", p.similarity_candidates, Bounds::atLeast(0).runtime(),
+      "Besides the max_candidates best keyframes of the temporal filter, this many of the most similar "
+      "keyframes are verified and scored too (local maxima at least suppression_radius apart), so that a "
+      "keyframe with strong evidence is judged on it even when the filter's belief sits elsewhere. The best "
+      "max_candidates of both are reported.");
+    v("suppression_radius", p.suppression_radius, Bounds::atLeast(0).runtime(),
+      "Candidates of one kind (the filter's, the similarity's) are local maxima at least this many keyframes "
+      "apart.");
     v("min_probability", p.min_probability, Bounds::probability().runtime(),
       "Candidates below this (calibrated) loop probability are not reported. 0 reports every keyframe's best "
       "candidates, which precision-recall evaluation needs; for a hard decision use LoopCandidate.accepted "
@@ -92,7 +99,9 @@ struct LoopCandidate {
   double probability = 0.0;         // calibrated loop probability (CandidateScorer)
   double filter_probability = 0.0;  // the temporal filter's probability, one of its inputs
   double similarity = 0.0;          // Phi' of the query against this keyframe
-  bool accepted = false;            // verified and probability >= scoring/decision_probability
+  double saliency = 0.0;            // its robust z among the query's eligible keyframes (robustSaliency)
+  size_t eligible_keyframes = 0;    // how many keyframes of its map were eligible (and compared)
+  bool accepted = false;            // probability >= scoring/decision_probability (so verified, when verifying)
   Verification verification;        // geometric check (verified=false, inliers=0 when verification is off)
 };
 
@@ -113,7 +122,10 @@ struct DetectionResult {
   uint32_t query_robot = 0;  // RobotTeam: the robot that saw the query
   KeyframeIndex query_index = 0;
   std::vector<LoopCandidate> candidates;  // best first
-  std::vector<double> similarity;         // Phi' against every eligible keyframe (by database index)
+  // The candidates that were verified and scored but fell beyond max_candidates, best first: not
+  // reported, kept for evaluation (mild_offline --fit-every-candidate writes them as training data).
+  std::vector<LoopCandidate> unreported;
+  std::vector<double> similarity;  // Phi' against every eligible keyframe (by database index)
   StepStats stats;
 };
 
@@ -128,7 +140,7 @@ struct MapScope {
 // filter's belief over it, and the best separated keyframes as candidates, not yet verified.
 struct MapAnswer {
   QueryResult query;                      // Phi' against every keyframe in scope, and the query's stats
-  std::vector<LoopCandidate> candidates;  // at most max_candidates, by belief
+  std::vector<LoopCandidate> candidates;  // the filter's best, then the most similar, not yet verified
   double query_ms = 0.0;
   double filter_ms = 0.0;
 };
@@ -288,6 +300,18 @@ class LoopDetector {
   // Whether fitting candidate i (with `matches` descriptor matches) can change what is reported:
   // false when even `matches` inliers would leave it below the decision probability and below a
   // candidate already verified (verification/early_stop).
+  // The probability candidate c is published with, given verification v: the scorer's, through the
+  // verification gate (belowDecision) when v failed; the filter's when not verifying.
+  double publishedProbability(const LoopCandidate& c, const Verification& v) const;
+
+ public:
+  // The scorer's inputs of a candidate (CandidateScorer::Evidence).
+  static CandidateScorer::Evidence evidenceOf(const LoopCandidate& c) {
+    return {c.filter_probability, c.saliency, c.eligible_keyframes};
+  }
+  const CandidateScorer& scorer() const { return scorer_; }
+
+ private:
   bool fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
                     const std::vector<Verification>& earlier) const;
   // Verifies (when verifying) each candidate against the query, in the map it came from

@@ -68,6 +68,18 @@ struct MihParams {
   void validate() const { validateDeclared(*this); }
 };
 
+// The ids a probe reads: those below `end`. With a query budget, ids at or above `unbudgeted_from`
+// are read besides it, without counting against it: a caller that also wants the newest keyframes'
+// matches for another purpose (the near-past band reads the exclusion window) then gets the same
+// ids below `unbudgeted_from` as a probe that stops there. From a plain id: every id below it,
+// all of them budgeted.
+struct IdRange {
+  IdRange(FeatureId id_end) : end(id_end), unbudgeted_from(id_end) {}  // NOLINT(google-explicit-constructor)
+  IdRange(FeatureId id_end, FeatureId unbudgeted) : end(id_end), unbudgeted_from(std::min(unbudgeted, id_end)) {}
+  FeatureId end;
+  FeatureId unbudgeted_from;
+};
+
 // Work done by one probe pass, summed over query features.
 struct ProbeCounters {
   uint64_t buckets_probed = 0;
@@ -117,16 +129,16 @@ class MihIndex {
   // radius r of q's substrings (in no particular order within a bucket); with a query budget
   // (max_candidates_per_feature), for the ids of the shortest buckets up to that many.
   template <class Visit>
-  void probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  void probe(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const;
 
   // With inline_prefixes: calls visit(feature_id, first_64_bits) for the same entries, read from
   // the buckets themselves.
   template <class Visit>
-  void probeWithPrefixes(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  void probeWithPrefixes(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const;
 
   // The same ids appended to `out`, table after table, for callers that process them in bulk.
-  void gather(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, std::vector<FeatureId>& out) const {
-    probe(q, id_limit, counters, [&out](FeatureId id, int) { out.push_back(id); });
+  void gather(const Descriptor& q, IdRange ids, ProbeCounters& counters, std::vector<FeatureId>& out) const {
+    probe(q, ids, counters, [&out](FeatureId id, int) { out.push_back(id); });
   }
 
   // probe() with a query budget, in three steps, so that a caller with many query features can
@@ -150,9 +162,8 @@ class MihIndex {
   bool hasQueryBudget() const { return query_budget_ > 0; }
   void locate(const Descriptor& q, ProbeCounters& counters, ProbePlan& plan) const;
   void prepare(ProbePlan& plan) const;
-  void gatherPlanned(const ProbePlan& plan, FeatureId id_limit, ProbeCounters& counters,
-                     std::vector<FeatureId>& out) const {
-    readPlanned<false>(plan, id_limit, counters, [&out](FeatureId id, uint64_t, int) { out.push_back(id); });
+  void gatherPlanned(const ProbePlan& plan, IdRange ids, ProbeCounters& counters, std::vector<FeatureId>& out) const {
+    readPlanned<false>(plan, ids, counters, [&out](FeatureId id, uint64_t, int) { out.push_back(id); });
   }
 
   // True when substring t of a and b are within the probe radius, i.e. the pair meets in table t.
@@ -228,11 +239,11 @@ class MihIndex {
   template <class Found>
   void forEachProbedBucket(const Descriptor& q, ProbeCounters& counters, Found&& found) const;
   template <bool kPrefixes, class Visit>
-  void probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  void probeRuns(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const;
   template <bool kPrefixes, class Visit>
-  void probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  void probeWithinBudget(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const;
   template <bool kPrefixes, class Visit>
-  void readPlanned(const ProbePlan& plan, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const;
+  void readPlanned(const ProbePlan& plan, IdRange ids, ProbeCounters& counters, Visit&& visit) const;
   void merge(Shard& shard);
   // Merges the shards waiting in merge_queue_, oldest first, up to kMergeBudget entries moved (at
   // least one shard); all of them while merges are deferred.
@@ -265,14 +276,13 @@ class MihIndex {
 };
 
 template <class Visit>
-void MihIndex::probe(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
-  probeRuns<false>(q, id_limit, counters, [&](FeatureId id, uint64_t, int t) { visit(id, t); });
+void MihIndex::probe(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const {
+  probeRuns<false>(q, ids, counters, [&](FeatureId id, uint64_t, int t) { visit(id, t); });
 }
 
 template <class Visit>
-void MihIndex::probeWithPrefixes(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters,
-                                 Visit&& visit) const {
-  probeRuns<true>(q, id_limit, counters, [&](FeatureId id, uint64_t prefix, int) { visit(id, prefix); });
+void MihIndex::probeWithPrefixes(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const {
+  probeRuns<true>(q, ids, counters, [&](FeatureId id, uint64_t prefix, int) { visit(id, prefix); });
 }
 
 template <class Found>
@@ -294,11 +304,12 @@ void MihIndex::forEachProbedBucket(const Descriptor& q, ProbeCounters& counters,
 }
 
 template <bool kPrefixes, class Visit>
-void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
+void MihIndex::probeRuns(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const {
   if (query_budget_ > 0) {
-    probeWithinBudget<kPrefixes>(q, id_limit, counters, visit);
+    probeWithinBudget<kPrefixes>(q, ids, counters, visit);
     return;
   }
+  const FeatureId id_limit = ids.end;  // without a budget every id below the end is read
   // Buckets are scattered in memory. Their slots are requested in a batch first, then their runs,
   // so that the loads overlap instead of following one another.
   constexpr size_t kBatch = 64;
@@ -346,42 +357,50 @@ void MihIndex::probeRuns(const Descriptor& q, FeatureId id_limit, ProbeCounters&
 }
 
 template <bool kPrefixes, class Visit>
-void MihIndex::probeWithinBudget(const Descriptor& q, FeatureId id_limit, ProbeCounters& counters,
-                                 Visit&& visit) const {
+void MihIndex::probeWithinBudget(const Descriptor& q, IdRange ids, ProbeCounters& counters, Visit&& visit) const {
   thread_local ProbePlan plan;
   locate(q, counters, plan);
   prepare(plan);
-  readPlanned<kPrefixes>(plan, id_limit, counters, visit);
+  readPlanned<kPrefixes>(plan, ids, counters, visit);
 }
 
 template <bool kPrefixes, class Visit>
-void MihIndex::readPlanned(const ProbePlan& plan, FeatureId id_limit, ProbeCounters& counters, Visit&& visit) const {
+void MihIndex::readPlanned(const ProbePlan& plan, IdRange ids, ProbeCounters& counters, Visit&& visit) const {
   // The buckets of one query feature, shortest first when they do not all fit (prepare() sorted
   // them): a short bucket is a distinctive substring (high IDF, and what finds an old place); the
-  // longest ones are what grows with the map.
+  // longest ones are what grows with the map. Within a bucket the newest ids come first, so the
+  // unbudgeted ones (at or above ids.unbudgeted_from) are read before the budget is touched.
+  const FeatureId id_limit = ids.end, free_from = ids.unbudgeted_from;
+  const bool any_free = free_from < id_limit;
   uint32_t budget = query_budget_;
+  const auto read = [&](FeatureId id, uint64_t prefix, int t) {
+    ++counters.entries_visited;
+    visit(id, prefix, t);
+  };
   for (const ProbePlan::Bucket& b : plan.buckets_) {
-    if (budget == 0) break;
+    if (budget == 0 && !any_free) break;
     if (b.length == 0) continue;
     const Shard& shard = *static_cast<const Shard*>(b.shard);
     const Slot& s = shard.slots[b.slot];
-    for (uint32_t link = s.recent; link != kNone && budget > 0; link = shard.recent[link].next) {
+    for (uint32_t link = s.recent; link != kNone; link = shard.recent[link].next) {
       const Link& l = shard.recent[link];
       if (l.id >= id_limit) continue;  // recent ids descend: newest first
-      ++counters.entries_visited;
-      --budget;
-      visit(l.id, l.prefix, b.t);
-    }
-    const FeatureId* ids = shard.ids.data();
-    uint32_t e = s.end;
-    while (e != s.offset && ids[e - 1] >= id_limit) --e;  // settled ids ascend within a bucket
-    for (; e != s.offset && budget > 0; --e, --budget) {
-      ++counters.entries_visited;
-      if constexpr (kPrefixes) {
-        visit(ids[e - 1], shard.prefixes[e - 1], b.t);
-      } else {
-        visit(ids[e - 1], uint64_t{0}, b.t);
+      if (l.id >= free_from) {
+        read(l.id, l.prefix, b.t);
+        continue;
       }
+      if (budget == 0) break;
+      --budget;
+      read(l.id, l.prefix, b.t);
+    }
+    const FeatureId* ids_of = shard.ids.data();
+    uint32_t e = s.end;
+    while (e != s.offset && ids_of[e - 1] >= id_limit) --e;  // settled ids ascend within a bucket
+    for (; e != s.offset && ids_of[e - 1] >= free_from; --e) {
+      read(ids_of[e - 1], kPrefixes ? shard.prefixes[e - 1] : uint64_t{0}, b.t);
+    }
+    for (; e != s.offset && budget > 0; --e, --budget) {
+      read(ids_of[e - 1], kPrefixes ? shard.prefixes[e - 1] : uint64_t{0}, b.t);
     }
   }
 }

@@ -122,8 +122,8 @@ class KeyframeDatabase {
   // time), so that ORB's and BRISK's distances are unrolled loops.
   template <int kTailWords>
   // `plan`: its buckets located and prepared ahead (MihIndex::ProbePlan), or null to probe here.
-  void indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch, std::vector<Vote>& votes,
-                  QueryStats& stats, const MihIndex::ProbePlan* plan) const;
+  void indexVotes(const Descriptor& f, IdRange ids, IndexScratch& scratch, std::vector<Vote>& votes, QueryStats& stats,
+                  const MihIndex::ProbePlan* plan) const;
 
   DatabaseParams params_;
   SimilarityParams similarity_;

@@ -300,9 +300,7 @@ MapScope LoopDetector::ownScope(double stamp) const {
   const CandidateParams& cp = params_.candidates;
   if (cp.near_past) {
     NearPastRule near_past;
-    near_past.kappa = cp.near_past_kappa;
-    near_past.tolerance = cp.near_past_tolerance;
-    near_past.min_background = cp.near_past_min_background;
+    near_past.rise = cp.near_past_rise;
     near_past.floor = session_start_;
     scope.near_past = near_past;
   }
@@ -318,8 +316,12 @@ MapAnswer LoopDetector::queryMap(const DescriptorList& query, const MapScope& sc
   start = Clock::now();
   const std::vector<double>& belief = filter.update(answer.query.similarity);
   const std::vector<double>& similarity = answer.query.similarity;
-  for (KeyframeIndex j : separatedBest(belief, similarity, max_candidates,
-                                       static_cast<KeyframeIndex>(params_.candidates.suppression_radius))) {
+  const std::vector<double> saliency = robustSaliency(similarity);
+  const auto radius = static_cast<KeyframeIndex>(params_.candidates.suppression_radius);
+  const auto add = [&](KeyframeIndex j) {
+    for (const LoopCandidate& taken : answer.candidates) {
+      if (taken.index == j) return;
+    }
     LoopCandidate c;
     c.index = j;
     c.id = records_[j].id;
@@ -328,7 +330,16 @@ MapAnswer LoopDetector::queryMap(const DescriptorList& query, const MapScope& sc
     c.filter_probability = belief[j];
     c.probability = belief[j];
     c.similarity = similarity[j];
+    c.saliency = saliency[j];
+    c.eligible_keyframes = similarity.size();
     answer.candidates.push_back(c);
+  };
+  // The filter's best, then the most similar: evidence the filter's belief passed over is still
+  // verified and judged on its own (the scorer weighs both).
+  for (KeyframeIndex j : separatedBest(belief, similarity, max_candidates, radius)) add(j);
+  const auto similar = static_cast<size_t>(params_.candidates.similarity_candidates);
+  if (similar > 0) {
+    for (KeyframeIndex j : separatedBest(similarity, similarity, similar, radius)) add(j);
   }
   answer.filter_ms = msSince(start);
   return answer;
@@ -384,7 +395,11 @@ DetectionResult LoopDetector::process(Features features, double stamp, std::opti
   auto start = Clock::now();
   judge(result.candidates, features, maps);
   // max_candidates is per keyframe, however many maps were asked: the best after scoring.
-  if (result.candidates.size() > max_candidates) result.candidates.resize(max_candidates);
+  if (result.candidates.size() > max_candidates) {
+    result.unreported.assign(std::make_move_iterator(result.candidates.begin() + static_cast<long>(max_candidates)),
+                             std::make_move_iterator(result.candidates.end()));
+    result.candidates.resize(max_candidates);
+  }
   if (verifier_ && !result.candidates.empty()) result.stats.verify_ms = msSince(start);
 
   // Stored last: the query is never its own candidate, and a refusal above changes nothing.
@@ -420,10 +435,16 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features&
     for (size_t i = 0; i < candidates.size(); ++i) candidates[i].verification = std::move(verifications[i]);
   }
   for (LoopCandidate& c : candidates) {
-    c.probability = verifier_ ? scorer_.probability(c.filter_probability, c.verification) : c.filter_probability;
-    c.accepted = c.verification.verified && c.probability >= params_.scoring.decision_probability;
+    c.probability = publishedProbability(c, c.verification);
+    c.accepted = c.probability >= params_.scoring.decision_probability;
   }
   rankCandidates(candidates, params_.candidates.min_probability);
+}
+
+double LoopDetector::publishedProbability(const LoopCandidate& c, const Verification& v) const {
+  if (!verifier_) return c.filter_probability;
+  const double p = scorer_.probability(evidenceOf(c), v);
+  return v.verified ? p : belowDecision(p, params_.scoring.decision_probability);
 }
 
 bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
@@ -432,13 +453,14 @@ bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, si
   // inliers are a subset of the matches; the scorer is monotone in them, either way).
   Verification none, all;
   all.inliers = matches;
-  const double fp = candidates[i].filter_probability;
-  const double reachable = std::max(scorer_.probability(fp, none), scorer_.probability(fp, all));
+  all.verified = true;  // the best case: every match an inlier, and verified
+  const LoopCandidate& c = candidates[i];
+  const double reachable = std::max(publishedProbability(c, none), publishedProbability(c, all));
   if (reachable >= params_.scoring.decision_probability) return true;  // it could be accepted
   // Below the decision either way: it matters only if it could outrank the query's best so far,
   // which is all the evaluation (and a consumer taking the best candidate) reads.
   for (size_t k = 0; k < earlier.size(); ++k) {
-    if (scorer_.probability(candidates[k].filter_probability, earlier[k]) > reachable) return false;
+    if (publishedProbability(candidates[k], earlier[k]) > reachable) return false;
   }
   return true;
 }

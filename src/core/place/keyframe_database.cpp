@@ -201,8 +201,8 @@ QueryResult KeyframeDatabase::query(const cv::Mat& q, KeyframeIndex candidate_li
 }
 
 template <int kTailWords>
-void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, IndexScratch& scratch,
-                                  std::vector<Vote>& votes, QueryStats& stats, const MihIndex::ProbePlan* plan) const {
+void KeyframeDatabase::indexVotes(const Descriptor& f, IdRange ids, IndexScratch& scratch, std::vector<Vote>& votes,
+                                  QueryStats& stats, const MihIndex::ProbePlan* plan) const {
   const SimilarityParams& sp = similarity_;
   const int d0 = sp.max_distance;
   const int tp = sp.early_termination_threshold;
@@ -223,7 +223,7 @@ void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, Index
     // then the rows of the survivors, a few requested ahead of the one being read.
     auto& survivors = scratch.survivors;
     survivors.clear();
-    index_.probeWithPrefixes(f, id_limit, counters, [&](FeatureId id, uint64_t prefix) {
+    index_.probeWithPrefixes(f, ids, counters, [&](FeatureId id, uint64_t prefix) {
       const int partial = popcount64(f.words[0] ^ prefix);
       if (partial <= tp) survivors.push_back({id, partial});
     });
@@ -242,9 +242,9 @@ void KeyframeDatabase::indexVotes(const Descriptor& f, FeatureId id_limit, Index
     auto& candidates = scratch.candidates;
     candidates.clear();
     if (plan != nullptr) {
-      index_.gatherPlanned(*plan, id_limit, counters, candidates);
+      index_.gatherPlanned(*plan, ids, counters, candidates);
     } else {
-      index_.gather(f, id_limit, counters, candidates);
+      index_.gather(f, ids, counters, candidates);
     }
     // Candidates are scattered over the whole database, so each check waits for memory: the rows of
     // candidates a few steps ahead are requested while one is checked. A candidate that passes early
@@ -283,7 +283,12 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   }
 
   const SimilarityParams& sp = similarity_;
-  const FeatureId id_limit = keyframe_offsets_[n];
+  // With a near-past rule the exclusion window is read too: the band needs its matched counts. Its
+  // ids are read besides the query budget, so that the eligible keyframes get the same votes as
+  // without the rule (IdRange).
+  const KeyframeIndex n_votes = near_past != nullptr ? static_cast<KeyframeIndex>(size()) : n;
+  const FeatureId id_limit = keyframe_offsets_[n_votes];
+  const IdRange ids(id_limit, keyframe_offsets_[n]);
   const int d0 = sp.max_distance;
   // First every query feature's votes (pairs within d0), then the limit (the near past may lower
   // it), then the similarity from the votes below the limit.
@@ -320,11 +325,11 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
         if (d <= d0) feature_votes.push_back({id, 0, phi_(d)});
       }
     } else if (row_words_ == 4) {  // ORB, BRIEF: 256 bits
-      indexVotes<3>(f, id_limit, scratch, feature_votes, stats, plan);
+      indexVotes<3>(f, ids, scratch, feature_votes, stats, plan);
     } else if (row_words_ == 8) {  // BRISK, FREAK, AKAZE: up to 512 bits
-      indexVotes<7>(f, id_limit, scratch, feature_votes, stats, plan);
+      indexVotes<7>(f, ids, scratch, feature_votes, stats, plan);
     } else {
-      indexVotes<0>(f, id_limit, scratch, feature_votes, stats, plan);
+      indexVotes<0>(f, ids, scratch, feature_votes, stats, plan);
     }
     // Only votes need their keyframe, and they are few: look it up rather than store it per feature.
     for (Vote& v : feature_votes) v.keyframe = keyframeOf(v.feature);
@@ -336,8 +341,8 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   stats.buckets_probed += located.buckets_probed;
 
   if (near_past != nullptr) {
-    std::vector<uint32_t> matched(n, 0);
-    std::vector<uint32_t> last_feature(n, 0);
+    std::vector<uint32_t> matched(n_votes, 0);
+    std::vector<uint32_t> last_feature(n_votes, 0);
     size_t begin = 0;
     for (size_t i = 0; i < vote_end.size(); ++i) {
       for (size_t v = begin; v < vote_end[i]; ++v) {

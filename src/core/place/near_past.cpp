@@ -3,31 +3,26 @@
 #include <algorithm>
 #include <cmath>
 
-#include "mild_lcd/common/median.hpp"
-
 namespace mild {
 
 KeyframeIndex nearPastBand(const std::vector<uint32_t>& matched, KeyframeIndex limit, const NearPastRule& rule) {
+  const auto stored = static_cast<KeyframeIndex>(matched.size());
+  limit = std::min(limit, stored);
   const KeyframeIndex floor = std::min(rule.floor, limit);
-  const KeyframeIndex session = limit - floor;
-  if (session == 0) return 0;
-  // The background may include earlier sessions: they show elsewhere as well as anything does.
-  if (limit < static_cast<KeyframeIndex>(rule.min_background)) return session;
-  const KeyframeIndex window = std::min<KeyframeIndex>(limit, static_cast<KeyframeIndex>(std::max(1, rule.background)));
-  std::vector<double> level(window);
-  for (KeyframeIndex i = 0; i < window; ++i) level[i] = matched[limit - 1 - i];
-  const double centre = upperMedian(level);
-  for (double& v : level) v = std::abs(v - centre);
-  const double threshold = centre + rule.kappa * 1.4826 * upperMedian(level);
+  if (limit == floor) return 0;
+  // Without an exclusion window the newest keyframe is the present's nearest neighbour: the walk
+  // starts from it.
+  double valley = limit < stored ? *std::min_element(matched.begin() + limit, matched.end()) : matched[limit - 1];
   KeyframeIndex band = 0;
-  int below = 0;
   for (KeyframeIndex k = limit; k-- > floor;) {
-    if (matched[k] > threshold) {
-      band = limit - k;
-      below = 0;
-    } else if (++below > rule.tolerance) {
-      break;
-    }
+    // A count within its own spread of zero (valley <= rise^2) carries no view: the present's view
+    // had faded before here, and what lies beyond shows neither place.
+    if (valley <= rule.rise * rule.rise) break;
+    const double spread = rule.rise * std::sqrt(valley);
+    if (matched[k] > valley + spread) break;  // a place the present had left: a revisit, not the near past
+    if (matched[k] < valley - spread) break;  // the present's view ends here at once: older keyframes are not it
+    band = limit - k;
+    valley = std::min<double>(valley, matched[k]);
   }
   return band;
 }
