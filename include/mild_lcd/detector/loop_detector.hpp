@@ -47,7 +47,7 @@ struct CandidateParams {
       "between it and the query (the exclusion window included): a revisit is separated from the present by "
       "keyframes that show neither place. No background and no warm-up: a revisit at the first eligible "
       "keyframe is a candidate at once (place/near_past.hpp).");
-    v("near_past_rise", p.near_past_rise, Bounds::atLeast(0),
+    v("near_past_rise", p.near_past_rise, Bounds::in(0, 10),
       "How far a keyframe's matched count must rise above the valley to end the band, in units of the "
       "valley's square root (the spread of a count). Chosen by cross-validation over kinds and keyframe steps "
       "(docs/accuracy.md).");
