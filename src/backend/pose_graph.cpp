@@ -1,6 +1,7 @@
 #include "mild_lcd/backend/pose_graph.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -33,6 +34,18 @@ struct RelativePoseCost {
     r[0] = (c * ex + s * ey - dx) * inv_translation;
     r[1] = (-s * ex + c * ey - dy) * inv_translation;
     r[2] = wrap(b[2] - a[2] - T(dyaw)) * inv_rotation;
+    return true;
+  }
+};
+
+// A weak prior on a new chain's first keyframe: it ties the chain to the map until loops place it.
+struct PriorCost {
+  double x, y, yaw, inv_translation, inv_rotation;
+  template <class T>
+  bool operator()(const T* a, T* r) const {
+    r[0] = (a[0] - T(x)) * inv_translation;
+    r[1] = (a[1] - T(y)) * inv_translation;
+    r[2] = wrap(a[2] - T(yaw)) * inv_rotation;
     return true;
   }
 };
@@ -149,6 +162,23 @@ PlanarLoop planarLoop(const LoopMeasurement& loop, const Extrinsics& extrinsics)
   return out;
 }
 
+bool measurementIsValid(const LoopMeasurement& loop, double max_loop_distance) {
+  const Eigen::Vector4d q = loop.rotation.coeffs();
+  if (!q.allFinite() || std::abs(q.norm() - 1.0) > 0.1) return false;
+  if (!loop.translation.allFinite()) return false;
+  const double length = loop.translation.norm();
+  return loop.metric ? length <= max_loop_distance : length > 1e-9;
+}
+
+bool extrinsicsAreValid(const Extrinsics& extrinsics, double max_distance) {
+  if (!extrinsics.rotation.allFinite() || !extrinsics.translation.allFinite()) return false;
+  const Eigen::Matrix3d r = extrinsics.rotation;
+  if ((r.transpose() * r - Eigen::Matrix3d::Identity()).norm() > 1e-3 || std::abs(r.determinant() - 1.0) > 1e-3) {
+    return false;
+  }
+  return extrinsics.translation.norm() <= max_distance;
+}
+
 struct PoseGraph2D::Impl {
   ceres::Problem problem;
   std::deque<std::array<double, 3>> estimates;  // stable addresses: Ceres keeps pointers to them
@@ -159,30 +189,45 @@ struct PoseGraph2D::Impl {
 PoseGraph2D::PoseGraph2D(const PoseGraphParams& params, const Extrinsics& extrinsics)
     : params_(params), extrinsics_(extrinsics), impl_(std::make_unique<Impl>()) {
   params_.validate();
-  if (!extrinsics_.rotation.allFinite() || !extrinsics_.translation.allFinite() ||
-      std::abs(extrinsics_.rotation.determinant() - 1.0) > 1e-3) {
+  if (!extrinsicsAreValid(extrinsics_, params_.max_coordinate)) {
     throw InvalidInput("pose graph: the camera's extrinsics are not a rotation and a finite translation");
   }
 }
 
 PoseGraph2D::~PoseGraph2D() = default;
 
-void PoseGraph2D::addKeyframe(uint64_t id, const Pose2& odometry) {
+bool PoseGraph2D::acceptablePose(const Pose2& odometry) const {
+  return std::isfinite(odometry.x) && std::isfinite(odometry.y) && std::isfinite(odometry.yaw) &&
+         std::hypot(odometry.x, odometry.y) <= params_.max_coordinate;
+}
+
+void PoseGraph2D::addKeyframe(uint64_t id, const Pose2& odometry, bool new_chain) {
   if (index_.count(id)) throw InvalidInput("pose graph: keyframe " + std::to_string(id) + " is already in the graph");
-  if (!std::isfinite(odometry.x) || !std::isfinite(odometry.y) || !std::isfinite(odometry.yaw)) {
-    throw InvalidInput("pose graph: keyframe " + std::to_string(id) + " has a non-finite odometry pose");
+  if (!acceptablePose(odometry)) {
+    throw InvalidInput("pose graph: keyframe " + std::to_string(id) + " has a non-finite or out-of-range odometry pose");
   }
   const size_t i = ids_.size();
   Pose2 start = odometry;
-  if (i > 0) start = compose(estimate(i - 1), between(odometry_[i - 1], odometry));
+  if (i > 0) {
+    // A new chain's odometry has another origin: where the robot is, the previous keyframe's
+    // estimate is the best guess (it was there a keyframe ago).
+    start = new_chain ? estimate(i - 1) : compose(estimate(i - 1), between(odometry_[i - 1], odometry));
+  }
   ids_.push_back(id);
   index_.emplace(id, i);
   odometry_.push_back(odometry);
-  impl_->estimates.push_back({start.x, start.y, start.yaw});
+  impl_->estimates.push_back({start.x, start.y, wrapAngle(start.yaw)});
   double* block = impl_->estimates.back().data();
   impl_->problem.AddParameterBlock(block, 3);
   if (i == 0) {
-    impl_->problem.SetParameterBlockConstant(block);
+    impl_->problem.SetParameterBlockConstant(block);  // the map's origin
+    return;
+  }
+  if (new_chain) {
+    // Where the robot is, only roughly known (1 m, 0.5 rad): loops to the earlier chain move it.
+    impl_->problem.AddResidualBlock(
+        new ceres::AutoDiffCostFunction<PriorCost, 3, 3>(new PriorCost{start.x, start.y, start.yaw, 1.0, 2.0}), nullptr,
+        block);
     return;
   }
   const Pose2 delta = between(odometry_[i - 1], odometry);
@@ -199,6 +244,7 @@ void PoseGraph2D::addKeyframe(uint64_t id, const Pose2& odometry) {
 bool PoseGraph2D::addLoop(const LoopMeasurement& loop) {
   const auto q = index_.find(loop.query), c = index_.find(loop.candidate);
   if (q == index_.end() || c == index_.end() || q->second == c->second) return false;
+  if (!measurementIsValid(loop, params_.max_loop_distance)) return false;
   const PlanarLoop planar = planarLoop(loop, extrinsics_);
   if (!planar.valid) return false;
   const double inv_rotation = 1.0 / degrees(params_.loop_rotation_sigma_deg);
@@ -233,6 +279,15 @@ bool PoseGraph2D::addLoop(const LoopMeasurement& loop) {
   return true;
 }
 
+void PoseGraph2D::truncateLoops(size_t count) {
+  while (loops_.size() > count) {
+    impl_->problem.RemoveResidualBlock(impl_->loop_blocks.back());
+    impl_->loop_blocks.pop_back();
+    impl_->loop_costs.pop_back();
+    loops_.pop_back();
+  }
+}
+
 UpdateStats PoseGraph2D::optimize() {
   UpdateStats stats;
   const auto start = std::chrono::steady_clock::now();
@@ -246,12 +301,22 @@ UpdateStats PoseGraph2D::optimize() {
     options.max_solver_time_in_seconds = params_.max_solver_seconds;
     options.num_threads = 1;
     options.logging_type = ceres::SILENT;
+    const std::deque<std::array<double, 3>> before = impl_->estimates;  // values; the addresses stay
     ceres::Solver::Summary summary;
     ceres::Solve(options, &impl_->problem, &summary);
     stats.iterations = static_cast<int>(summary.iterations.size());
     stats.converged = summary.termination_type == ceres::CONVERGENCE;
     stats.initial_cost = summary.initial_cost;
     stats.final_cost = summary.final_cost;
+    bool sane = summary.termination_type != ceres::FAILURE;
+    for (const auto& e : impl_->estimates) {
+      sane = sane && std::isfinite(e[0]) && std::isfinite(e[1]) && std::isfinite(e[2]) &&
+             std::hypot(e[0], e[1]) <= params_.max_coordinate;
+    }
+    if (!sane) {
+      for (size_t i = 0; i < before.size(); ++i) impl_->estimates[i] = before[i];
+      stats.failed = true;
+    }
     for (auto& e : impl_->estimates) e[2] = wrapAngle(e[2]);
   }
   for (size_t i = 0; i < loops_.size(); ++i) {
@@ -260,7 +325,7 @@ UpdateStats PoseGraph2D::optimize() {
     const double* blocks[2] = {impl_->estimates[loop.query].data(), impl_->estimates[loop.candidate].data()};
     impl_->loop_costs[i]->Evaluate(blocks, r, nullptr);
     loop.state.residual = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
-    loop.state.inlier = loop.state.residual <= params_.outlier_threshold;
+    loop.state.inlier = std::isfinite(loop.state.residual) && loop.state.residual <= params_.outlier_threshold;
   }
   stats.solve_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return stats;

@@ -27,11 +27,29 @@ void visitSettings(Settings& s, Visit&& visit) {
         "LoopClosure's header.frame_id");
   visit("use_all_verified", s.use_all_verified, Bounds::any(),
         "loop edges from every verified candidate with a relative pose; false: the accepted ones only");
-  visit("odometry_wait", s.odometry_wait, Bounds::above(0),
-        "seconds a keyframe waits for odometry (or tf) at its stamp before it is dropped with a warning");
+  visit("odometry_wait", s.odometry_wait, Bounds::aboveUpTo(0, 3600),
+        "seconds a keyframe waits for odometry (or tf) at its stamp before it is dropped (counted in the "
+        "diagnostics, with a warning)");
+  visit("max_future_stamp", s.max_future_stamp, Bounds::in(0, 3600),
+        "a keyframe stamped more than this many seconds ahead of the clock is dropped at once (counted): it would "
+        "hold back every keyframe after it");
+  visit("max_waiting", s.max_waiting, Bounds::in(1, 1000000),
+        "keyframes waiting for their pose, at most; beyond, the oldest is dropped (counted)");
+  visit("robot", s.robot, Bounds::any(),
+        "the robot (LoopClosure.query_robot) whose keyframes form the trajectory; empty: the first one seen. Other "
+        "robots' keyframes, and loops to other robots' keyframes, are counted and skipped");
+  visit("max_odometry_step", s.max_odometry_step, Bounds::aboveUpTo(0, 1e6),
+        "metres the odometry may move between consecutive keyframes: a keyframe beyond is dropped as a spike "
+        "(counted); three in a row start a new odometry chain (the odometry restarted)");
+  visit("max_extrinsics_distance", s.max_extrinsics_distance, Bounds::aboveUpTo(0, 1e6),
+        "metres the camera may sit from the base: a tf base_frame -> camera farther (or not finite, or not a "
+        "rotation) is refused (counted) and a forward-looking camera at the base's origin is used");
   visit("publish_tf", s.publish_tf, Bounds::any(), "broadcast map_frame -> odom_frame");
-  visit("tf_rate", s.tf_rate, Bounds::above(0),
+  visit("tf_rate", s.tf_rate, Bounds::aboveUpTo(0, 1000),
         "rate of that broadcast, and of retrying the keyframes that wait for their pose, Hz");
+  visit("publish_rate", s.publish_rate, Bounds::aboveUpTo(0, 1000),
+        "the trajectory, odometry path and loop markers are published at most this often, Hz (each holds every "
+        "keyframe: publishing them per keyframe would cost O(n) each); always once after the last change");
 }
 
 template <class T>
@@ -59,6 +77,11 @@ PoseGraphSettings PoseGraphSettings::load(const mild::ParameterSource& source) {
       if (auto v = source.getBool(name)) field = *v;
     } else if constexpr (std::is_same_v<T, std::string>) {
       if (auto v = source.getString(name)) field = *v;
+    } else if constexpr (std::is_same_v<T, int>) {
+      if (auto v = source.getInt(name)) {
+        if (*v < 0 || *v > std::numeric_limits<int>::max()) throw InvalidInput("parameter ~" + std::string(name) + " is out of range");
+        field = static_cast<int>(*v);
+      }
     } else {
       if (auto v = source.getDouble(name)) field = *v;
     }

@@ -55,6 +55,8 @@ struct PoseGraphParams {
   double outlier_threshold = 3.0;
   int max_iterations = 30;
   double max_solver_seconds = 0.2;
+  double max_coordinate = 1e5;
+  double max_loop_distance = 100.0;
 
   static constexpr const char* kSection = "graph";
   template <class Self, class Visit>
@@ -97,6 +99,12 @@ struct PoseGraphParams {
       "Solver iterations per update, at most (each update starts from the previous solution).");
     v("max_solver_seconds", p.max_solver_seconds, Bounds::above(0),
       "Wall time of one update, at most, seconds: the solver stops there with its best solution so far.");
+    v("max_coordinate", p.max_coordinate, Bounds::above(0),
+      "Odometry poses (and solved estimates) farther than this from the origin, metres, are refused: a finite but "
+      "absurd value (1e300) would otherwise ruin every later solve.");
+    v("max_loop_distance", p.max_loop_distance, Bounds::above(0),
+      "Metric loop measurements whose translation is longer than this, metres, are refused: two keyframes that "
+      "see the same place are not that far apart.");
   }
   void validate() const { validateDeclared(*this); }
 };
@@ -137,6 +145,12 @@ struct PlanarLoop {
   bool valid = false;  // false for a non-metric translation with (nearly) no horizontal part
 };
 PlanarLoop planarLoop(const LoopMeasurement& loop, const Extrinsics& extrinsics);
+// A measurement the graph can take: finite, a rotation quaternion of norm near 1, a metric
+// translation no longer than max_loop_distance, a unit translation that is not zero.
+bool measurementIsValid(const LoopMeasurement& loop, double max_loop_distance);
+// Extrinsics the graph can take: a rotation (orthonormal, det 1) and a finite translation no
+// longer than max_distance.
+bool extrinsicsAreValid(const Extrinsics& extrinsics, double max_distance);
 
 struct LoopEdgeState {
   uint64_t query = 0, candidate = 0;
@@ -150,6 +164,9 @@ struct UpdateStats {
   int iterations = 0;
   bool converged = false;
   double initial_cost = 0.0, final_cost = 0.0;
+  // The solve failed or left a non-finite or out-of-range estimate: the estimates are those from
+  // before it, and the next update starts from them again.
+  bool failed = false;
 };
 
 class PoseGraph2D {
@@ -161,16 +178,25 @@ class PoseGraph2D {
 
   // Appends a keyframe with its odometry pose (odom frame). Its estimate starts as the previous
   // keyframe's estimate moved by the odometry between them; the first keyframe is the map's origin
-  // (fixed at its odometry pose: map and odom coincide until a loop). Throws InvalidInput for an id
-  // already in the graph or a non-finite pose.
-  void addKeyframe(uint64_t id, const Pose2& odometry);
+  // (fixed at its odometry pose: map and odom coincide until a loop). new_chain: no odometry edge to
+  // the previous keyframe (the odometry restarted with another origin); the keyframe is held at the
+  // previous keyframe's estimate (the best guess of where the robot is) by a weak prior (1 m,
+  // 0.5 rad) that loops to earlier keyframes override. Throws InvalidInput for
+  // an id already in the graph or a pose that is not finite or farther than max_coordinate.
+  void addKeyframe(uint64_t id, const Pose2& odometry, bool new_chain = false);
+  // Whether addKeyframe would take this odometry pose (finite, within max_coordinate).
+  bool acceptablePose(const Pose2& odometry) const;
   bool contains(uint64_t id) const { return index_.count(id) != 0; }
   size_t size() const { return ids_.size(); }
 
   // Adds a loop edge between two keyframes of the graph. Returns false (adding nothing) when either
-  // is unknown, they are the same, or the measurement has no usable planar part.
+  // is unknown, they are the same, or the measurement has no usable planar part: use
+  // measurementIsValid first to tell an absurd measurement from an unknown keyframe.
   bool addLoop(const LoopMeasurement& loop);
   size_t loopCount() const { return loops_.size(); }
+  // Removes the loops added after the first `count` (after a failed solve: the graph goes back to
+  // what solved).
+  void truncateLoops(size_t count);
 
   // Re-solves from the current estimate, bounded by max_iterations and max_solver_seconds, then
   // refreshes every loop edge's residual and inlier flag.

@@ -20,8 +20,14 @@ struct PoseGraphSettings {
   std::string camera_frame;
   bool use_all_verified = false;
   double odometry_wait = 2.0;
+  double max_future_stamp = 1.0;
+  int max_waiting = 1000;
+  std::string robot;
+  double max_odometry_step = 50.0;
+  double max_extrinsics_distance = 10.0;
   bool publish_tf = true;
   double tf_rate = 20.0;
+  double publish_rate = 2.0;
   mild::backend::PoseGraphParams graph;
 
   // Reads every setting the source holds, type-checked, rejects unknown names and validates.
