@@ -16,8 +16,7 @@ std::optional<Pose2> planarPose(const Eigen::Vector3d& position, const Eigen::Qu
   if (!position.allFinite() || !q.allFinite()) return std::nullopt;
   if (position.norm() > max_coordinate || std::abs(q.norm() - 1.0) > 0.1) return std::nullopt;
   const Eigen::Quaterniond u = orientation.normalized();
-  const double yaw =
-      std::atan2(2.0 * (u.w() * u.z() + u.x() * u.y()), 1.0 - 2.0 * (u.y() * u.y() + u.z() * u.z()));
+  const double yaw = std::atan2(2.0 * (u.w() * u.z() + u.x() * u.y()), 1.0 - 2.0 * (u.y() * u.y() + u.z() * u.z()));
   return Pose2{position.x(), position.y(), yaw};
 }
 
@@ -33,7 +32,7 @@ bool KeyframeAdmission::addOdometry(int64_t stamp_ns, const Eigen::Vector3d& pos
   }
   if (!odometry_.empty() && stamp_ns <= odometry_.back().first) {
     if (stamp_ns == odometry_.back().first) return true;  // the same sample again
-    odometry_.clear();                                     // time went back: the source restarted
+    odometry_.clear();                                    // time went back: the source restarted
   }
   odometry_.emplace_back(stamp_ns, *pose);
   while (odometry_.size() > params_.max_odometry) odometry_.pop_front();

@@ -204,7 +204,8 @@ bool PoseGraph2D::acceptablePose(const Pose2& odometry) const {
 void PoseGraph2D::addKeyframe(uint64_t id, const Pose2& odometry, bool new_chain) {
   if (index_.count(id)) throw InvalidInput("pose graph: keyframe " + std::to_string(id) + " is already in the graph");
   if (!acceptablePose(odometry)) {
-    throw InvalidInput("pose graph: keyframe " + std::to_string(id) + " has a non-finite or out-of-range odometry pose");
+    throw InvalidInput("pose graph: keyframe " + std::to_string(id) +
+                       " has a non-finite or out-of-range odometry pose");
   }
   const size_t i = ids_.size();
   Pose2 start = odometry;

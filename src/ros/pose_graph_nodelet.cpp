@@ -135,8 +135,10 @@ class PoseGraphNodelet : public nodelet::Nodelet {
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID("mild_lcd_pose_graph");
     diagnostics_->add("pose graph", this, &PoseGraphNodelet::report);
-    diagnostics_timer_ =
-        nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) { diagnostics_->update(); });
+    // force_update on wall time: update() waits for ros::Time to move, and simulated time stands
+    // still once a bag has played, when the final counts matter most.
+    diagnostics_timer_ = nh.createWallTimer(ros::WallDuration(1.0),
+                                            [this](const ros::WallTimerEvent&) { diagnostics_->force_update(); });
     if (settings_.use_odometry_topic) {
       odom_sub_ = nh.subscribe("odom", 1000, &PoseGraphNodelet::onOdometry, this);
     }
@@ -157,8 +159,9 @@ class PoseGraphNodelet : public nodelet::Nodelet {
                                          Eigen::Vector3d(p.x, p.y, p.z), quaternionOf(msg->pose.pose.orientation));
     }
     if (!accepted) {
-      NODELET_WARN_THROTTLE(5.0, "pose graph: odometry at %.3f refused: not finite, beyond graph/max_coordinate "
-                                 "(%g m) or not a rotation (counted in the diagnostics)",
+      NODELET_WARN_THROTTLE(5.0,
+                            "pose graph: odometry at %.3f refused: not finite, beyond graph/max_coordinate "
+                            "(%g m) or not a rotation (counted in the diagnostics)",
                             msg->header.stamp.toSec(), settings_.graph.max_coordinate);
     }
     input_ready_.notify_one();
@@ -253,16 +256,15 @@ class PoseGraphNodelet : public nodelet::Nodelet {
   // A warning per drop, throttled, naming the cause; the diagnostics count every one.
   void warnAboutDrops(const mild::backend::BackendCounters& c) {
     if (c.dropped() == reported_drops_ && c.loops_refused == reported_refused_) return;
-    NODELET_WARN_THROTTLE(5.0,
-                          "pose graph: %lu keyframes dropped (no odometry %lu, future stamp %lu, duplicate %lu, "
-                          "odometry jump %lu, invalid pose %lu, other robot %lu, queue full %lu), %lu loops refused",
-                          static_cast<unsigned long>(c.dropped()), static_cast<unsigned long>(c.dropped_no_odometry),
-                          static_cast<unsigned long>(c.dropped_future_stamp),
-                          static_cast<unsigned long>(c.dropped_duplicate),
-                          static_cast<unsigned long>(c.dropped_odometry_jump),
-                          static_cast<unsigned long>(c.dropped_invalid_pose),
-                          static_cast<unsigned long>(c.dropped_other_robot),
-                          static_cast<unsigned long>(c.dropped_queue_full), static_cast<unsigned long>(c.loops_refused));
+    NODELET_WARN_THROTTLE(
+        5.0,
+        "pose graph: %lu keyframes dropped (no odometry %lu, future stamp %lu, duplicate %lu, "
+        "odometry jump %lu, invalid pose %lu, other robot %lu, queue full %lu), %lu loops refused",
+        static_cast<unsigned long>(c.dropped()), static_cast<unsigned long>(c.dropped_no_odometry),
+        static_cast<unsigned long>(c.dropped_future_stamp), static_cast<unsigned long>(c.dropped_duplicate),
+        static_cast<unsigned long>(c.dropped_odometry_jump), static_cast<unsigned long>(c.dropped_invalid_pose),
+        static_cast<unsigned long>(c.dropped_other_robot), static_cast<unsigned long>(c.dropped_queue_full),
+        static_cast<unsigned long>(c.loops_refused));
     reported_drops_ = c.dropped();
     reported_refused_ = c.loops_refused;
   }
@@ -275,16 +277,19 @@ class PoseGraphNodelet : public nodelet::Nodelet {
     try {
       const auto t = tf_buffer_->lookupTransform(settings_.base_frame, frame, ros::Time(0));
       const Eigen::Quaterniond q = quaternionOf(t.transform.rotation);
-      if (q.coeffs().allFinite() && q.norm() > 0.5) e.rotation = q.normalized().toRotationMatrix();
-      else e.rotation = Eigen::Matrix3d::Constant(std::nan(""));
+      if (q.coeffs().allFinite() && q.norm() > 0.5)
+        e.rotation = q.normalized().toRotationMatrix();
+      else
+        e.rotation = Eigen::Matrix3d::Constant(std::nan(""));
       e.translation = Eigen::Vector3d(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z);
       if (builder_->start(e, settings_.max_extrinsics_distance)) {
         NODELET_INFO("pose graph: camera %s at (%.2f, %.2f, %.2f) in %s", frame.c_str(), e.translation.x(),
                      e.translation.y(), e.translation.z(), settings_.base_frame.c_str());
       } else {
-        NODELET_WARN("pose graph: tf %s -> %s refused (not finite, not a rotation, or farther than "
-                     "~max_extrinsics_distance %g m): a forward-looking camera at the base's origin is assumed",
-                     settings_.base_frame.c_str(), frame.c_str(), settings_.max_extrinsics_distance);
+        NODELET_WARN(
+            "pose graph: tf %s -> %s refused (not finite, not a rotation, or farther than "
+            "~max_extrinsics_distance %g m): a forward-looking camera at the base's origin is assumed",
+            settings_.base_frame.c_str(), frame.c_str(), settings_.max_extrinsics_distance);
       }
       return true;
     } catch (const tf2::TransformException& ex) {

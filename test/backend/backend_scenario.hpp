@@ -40,7 +40,7 @@ inline std::vector<Pose2> threeLaps() {
 // What the detector would publish for two keyframes whose bases are at query and candidate: the
 // candidate camera's pose in the query camera's optical frame; a unit translation unless metric.
 inline LoopMeasurement measure(const Pose2& query, const Pose2& candidate, uint64_t qi, uint64_t ci, bool metric,
-                        const Extrinsics& e = Extrinsics::forwardLooking()) {
+                               const Extrinsics& e = Extrinsics::forwardLooking()) {
   const Pose2 rel = between(query, candidate);
   const Eigen::Matrix3d rz = Eigen::AngleAxisd(rel.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   const Eigen::Vector3d t(rel.x, rel.y, 0.0);

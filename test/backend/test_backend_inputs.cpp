@@ -23,7 +23,9 @@ constexpr int64_t kSecond = 1000000000;
 constexpr int64_t kStart = 1000 * kSecond;
 constexpr int64_t kPeriod = kSecond / 10;  // keyframes at 10 Hz
 
-Eigen::Quaterniond yawQuaternion(double yaw) { return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ())); }
+Eigen::Quaterniond yawQuaternion(double yaw) {
+  return Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+}
 
 // Three laps with drifted odometry; keyframe i at kStart + i kPeriod with its odometry sample, and
 // metric loops from every 4th keyframe of laps 2 and 3 to the nearest of lap 1. Hooks let a test
@@ -130,9 +132,9 @@ TEST(BackendInputs, OdometryNonFiniteOrAbsurdIsRefusedAndCounted) {
   r.spoil_odometry = [](size_t i, Eigen::Vector3d& p, Eigen::Quaterniond& q) {
     if (i == 50) p.x() = kNaN;
     if (i == 60) q = Eigen::Quaterniond(kInf, 0, 0, 0);
-    if (i == 70) p.y() = 1e300;                          // beyond graph/max_coordinate
-    if (i == 80) q = Eigen::Quaterniond(0, 0, 0, 0);     // not a rotation
-    if (i == 90) p.x() += 5000.0;                        // a finite spike: the keyframe jumps
+    if (i == 70) p.y() = 1e300;                       // beyond graph/max_coordinate
+    if (i == 80) q = Eigen::Quaterniond(0, 0, 0, 0);  // not a rotation
+    if (i == 90) p.x() += 5000.0;                     // a finite spike: the keyframe jumps
   };
   r.run();
   ASSERT_NO_FATAL_FAILURE(r.expectSaneResult());
@@ -174,7 +176,8 @@ TEST(BackendInputs, TfPoseNonFiniteOrAbsurdIsRefusedAndCounted) {
 }
 
 TEST(BackendInputs, CameraMountingNonFiniteOrAbsurdFallsBackAndIsCounted) {
-  for (const Eigen::Vector3d& t : {Eigen::Vector3d(kNaN, 0, 0), Eigen::Vector3d(1e300, 0, 0), Eigen::Vector3d(0, 50, 0)}) {
+  for (const Eigen::Vector3d& t :
+       {Eigen::Vector3d(kNaN, 0, 0), Eigen::Vector3d(1e300, 0, 0), Eigen::Vector3d(0, 50, 0)}) {
     GraphBuilder builder(PoseGraphParams{}, BuilderParams{});
     Extrinsics e = Extrinsics::forwardLooking();
     e.translation = t;
@@ -197,11 +200,21 @@ TEST(BackendInputs, LoopMeasurementNonFiniteOrAbsurdIsRefusedAndCounted) {
     if (k.loops.empty() || spoiled >= 5) return;
     LoopMeasurement& m = k.loops[0].measurement;
     switch (spoiled++) {
-      case 0: m.translation.x() = kNaN; break;
-      case 1: m.translation = Eigen::Vector3d(0, 0, 1e200); break;  // a metric loop 1e200 m long
-      case 2: m.rotation = Eigen::Quaterniond(kNaN, 0, 0, 0); break;
-      case 3: m.rotation = Eigen::Quaterniond(0, 0, 0, 0); break;
-      case 4: m.metric = false, m.translation.setZero(); break;
+      case 0:
+        m.translation.x() = kNaN;
+        break;
+      case 1:
+        m.translation = Eigen::Vector3d(0, 0, 1e200);
+        break;  // a metric loop 1e200 m long
+      case 2:
+        m.rotation = Eigen::Quaterniond(kNaN, 0, 0, 0);
+        break;
+      case 3:
+        m.rotation = Eigen::Quaterniond(0, 0, 0, 0);
+        break;
+      case 4:
+        m.metric = false, m.translation.setZero();
+        break;
     }
   };
   r.run();

@@ -8,10 +8,10 @@
 
 #include <gtest/gtest.h>
 
+#include "backend_scenario.hpp"
 #include "mild_lcd/backend/pose_graph.hpp"
 #include "mild_lcd/backend/trajectory.hpp"
 #include "mild_lcd/common/errors.hpp"
-#include "backend_scenario.hpp"
 
 namespace mild::backend {
 namespace {

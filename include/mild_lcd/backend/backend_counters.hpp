@@ -16,13 +16,13 @@ struct BackendCounters {
   uint64_t received = 0;
   uint64_t in_graph = 0;
   uint64_t waiting = 0;
-  uint64_t dropped_no_odometry = 0;   // no odometry (or tf) at its stamp within odometry_wait
-  uint64_t dropped_future_stamp = 0;  // stamped more than max_future_stamp ahead of the clock
-  uint64_t dropped_duplicate = 0;     // the same id and stamp as a keyframe already in the graph
-  uint64_t dropped_odometry_jump = 0; // its odometry moved more than max_odometry_step from the last keyframe's
-  uint64_t dropped_invalid_pose = 0;  // its pose (interpolated odometry or tf) non-finite or out of range
-  uint64_t dropped_other_robot = 0;   // query_robot is not the robot this back-end follows
-  uint64_t dropped_queue_full = 0;    // more than max_waiting keyframes waited for their pose
+  uint64_t dropped_no_odometry = 0;    // no odometry (or tf) at its stamp within odometry_wait
+  uint64_t dropped_future_stamp = 0;   // stamped more than max_future_stamp ahead of the clock
+  uint64_t dropped_duplicate = 0;      // the same id and stamp as a keyframe already in the graph
+  uint64_t dropped_odometry_jump = 0;  // its odometry moved more than max_odometry_step from the last keyframe's
+  uint64_t dropped_invalid_pose = 0;   // its pose (interpolated odometry or tf) non-finite or out of range
+  uint64_t dropped_other_robot = 0;    // query_robot is not the robot this back-end follows
+  uint64_t dropped_queue_full = 0;     // more than max_waiting keyframes waited for their pose
   // Inputs refused at the boundary.
   uint64_t odometry_rejected = 0;  // odometry messages: non-finite, out of range, or not a rotation
   uint64_t tf_rejected = 0;        // camera mountings (tf base -> camera) refused
