@@ -145,7 +145,8 @@ TEST(PoseGraphHostile, RefusesCountsAndKeepsGoingThroughAReset) {
   // keyframe of the same id (80 m).
   ASSERT_GT(edges.size(), 0u);
   size_t segments = 0;
-  for (const auto& marker : edges.messages().back().markers) {
+  const visualization_msgs::MarkerArray drawn = edges.messages().back();  // a copy: messages() is a temporary
+  for (const auto& marker : drawn.markers) {
     for (size_t i = 0; i + 1 < marker.points.size(); i += 2) {
       const double length =
           std::hypot(marker.points[i].x - marker.points[i + 1].x, marker.points[i].y - marker.points[i + 1].y);

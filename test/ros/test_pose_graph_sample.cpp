@@ -87,7 +87,8 @@ TEST(PoseGraphSample, CorrectsTheDrift) {
   const double ate_before = mild::backend::absoluteTrajectoryError(est_before, truth);
   const double ate_after = mild::backend::absoluteTrajectoryError(est_after, truth);
   size_t kept = 0, rejected = 0;
-  for (const auto& m : edges.messages().back().markers) (m.ns == "loops_kept" ? kept : rejected) = m.points.size() / 2;
+  const visualization_msgs::MarkerArray drawn = edges.messages().back();  // a copy: messages() is a temporary
+  for (const auto& m : drawn.markers) (m.ns == "loops_kept" ? kept : rejected) = m.points.size() / 2;
   std::printf(
       "pose graph on the sample: %zu keyframes, ATE odometry %.3f m, corrected %.3f m (ratio %.3f), loop edges "
       "kept %zu, rejected %zu\n",
