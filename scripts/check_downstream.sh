@@ -51,11 +51,7 @@ readme, code = (open(p, encoding="utf-8").read() for p in sys.argv[1:])
 sys.exit(0 if code in readme else 1)
 PY
 done
-PORT=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("localhost", 0)); print(s.getsockname()[1])')
-export ROS_MASTER_URI="http://localhost:$PORT"
-roscore -p "$PORT" >"$OUT/roscore.log" 2>&1 &
-core=$!
-for _ in $(seq 100); do rosparam get /rosdistro >/dev/null 2>&1 && break; sleep 0.2; done
+mild_start_private_roscore "$OUT" || problems+="roscore did not start; "  # stopped on exit (common.sh)
 listen() {  # name, command...: starts the listener, publishes one LoopClosure, checks what it printed
   local name=$1
   shift
@@ -88,8 +84,6 @@ listen() {  # name, command...: starts the listener, publishes one LoopClosure, 
 }
 listen cpp_listener "$OUT/devel/lib/mild_lcd_downstream_example/loop_closure_listener"
 listen python_listener /usr/bin/python3 -u "$PKG/scripts/loop_closure_listener.py"
-kill -INT "$core" 2>/dev/null || true
-wait "$core" || true
 if [[ -z "$problems" ]]; then
   junit downstream-listeners the_readme_examples_print_accepted_loops 0 ""
   echo "downstream: the README's C++ and Python LoopClosure examples print the accepted loop"

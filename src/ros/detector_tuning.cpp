@@ -3,7 +3,7 @@
 #include <dynamic_reconfigure/ConfigDescription.h>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/ros/tuning_config.hpp"
 
 namespace mild_lcd {

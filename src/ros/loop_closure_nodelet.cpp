@@ -23,7 +23,7 @@
 #include "detector_tuning.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"

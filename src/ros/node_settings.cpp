@@ -7,7 +7,7 @@
 #include <sstream>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 
 namespace mild_lcd {
 namespace {

@@ -7,7 +7,7 @@
 #include <dynamic_reconfigure/Config.h>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/ros/tuning_cfg.hpp"
 
 namespace mild_lcd {

@@ -22,7 +22,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 
 namespace {
 

@@ -24,7 +24,7 @@
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "offline_plots.hpp"
 
 namespace fs = std::filesystem;

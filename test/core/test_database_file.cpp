@@ -16,6 +16,7 @@
 #include <cstring>
 
 #include "../common/scratch_folder.hpp"
+#include "fixture_params.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
@@ -29,12 +30,7 @@ namespace {
 const std::string& kFixture = test::kFixtureDir;
 
 using test::fixtureFrames;
-
-DetectorParams fixtureParams() {
-  DetectorParams p;
-  p.candidates.exclusion_frames = 8;
-  return p;
-}
+using test::fixtureParams;
 
 void process(LoopDetector& d, size_t first, size_t last, std::vector<DetectionResult>* out = nullptr) {
   for (size_t i = first; i < last; ++i) {

@@ -12,6 +12,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "fixture_params.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
@@ -25,12 +26,7 @@ namespace {
 const std::string& kFixture = test::kFixtureDir;
 
 using test::fixtureFrames;
-
-DetectorParams fixtureParams() {
-  DetectorParams p;
-  p.candidates.exclusion_frames = 8;  // the bench's 40 frames at a stride of 5
-  return p;
-}
+using test::fixtureParams;
 
 // A SLAM back-end acts on candidates at or above the calibrated decision probability.
 constexpr double kDecision = 0.5;

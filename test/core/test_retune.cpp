@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "mild_lcd/detector/loop_detector.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "test_images.hpp"
 
 namespace mild {

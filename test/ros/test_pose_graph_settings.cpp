@@ -9,23 +9,17 @@
 
 #include <gtest/gtest.h>
 
-#include "mild_lcd/params/parameters.hpp"
+#include "../core/error_text.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
 #include "mild_lcd/ros/pose_graph_settings.hpp"
 
 namespace mild_lcd {
 namespace {
 
+using mild::test::errorOf;
+
 PoseGraphSettings from(const std::string& yaml) {
   return PoseGraphSettings::load(mild::YamlParameterSource::fromString(yaml));
-}
-
-std::string errorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(PoseGraphSettings, DefaultsAndValues) {

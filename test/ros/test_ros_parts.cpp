@@ -19,10 +19,12 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "../common/scratch_folder.hpp"
+#include "../core/error_text.hpp"
+#include "../core/fixture_params.hpp"
 #include "../core/test_images.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/io/database_file.hpp"
-#include "mild_lcd/params/parameters.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
@@ -37,18 +39,11 @@ namespace mild_lcd {
 namespace {
 
 using mild::YamlParameterSource;
+using mild::test::errorOf;
+using mild::test::fixtureParams;
 
 NodeSettings settingsFrom(const std::string& yaml, const std::string& default_dir = "/tmp/mild_default") {
   return NodeSettings::load(YamlParameterSource::fromString(yaml), default_dir);
-}
-
-std::string errorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
@@ -831,12 +826,6 @@ sensor_msgs::ImagePtr imageOf(const cv::Mat& grey, double stamp) {
   msg->step = static_cast<uint32_t>(grey.cols);
   msg->data.assign(grey.data, grey.data + grey.total());
   return msg;
-}
-
-mild::DetectorParams fixtureParams() {
-  mild::DetectorParams p;
-  p.candidates.exclusion_frames = 8;  // the fixture is every 5th frame: a revisit at 47-59
-  return p;
 }
 
 // Everything a keyframe's answer says, in the order the answers came.

@@ -36,7 +36,7 @@
 
 #include "mild_lcd/backend/pose2.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
 
 namespace mild::backend {
 

@@ -209,7 +209,7 @@ class LoopDetector {
   const DetectorParams& params() const { return params_; }
 
   // Changes the parameters while running. Only runtimeParameterNames() may differ from params()
-  // (parameters.hpp); anything else, or an invalid value, throws InvalidInput naming it and changes
+  // (detector/detector_parameters.hpp); anything else, or an invalid value, throws InvalidInput naming it and changes
   // nothing. A changed verification rebuilds the GeometricVerifier (a verifier installed with
   // setVerifier is kept). Touches only the candidate, scoring and verification parameters, so
   // prepareRestore (which reads the database and filter ones) may run beside it.

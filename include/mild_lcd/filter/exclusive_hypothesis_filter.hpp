@@ -9,7 +9,7 @@
 namespace mild {
 
 // The parameters of ExclusiveHypothesisFilter (below), section exclusive_hypotheses/. The names
-// filter/<name> of earlier versions are read too (parameters.cpp).
+// filter/<name> of earlier versions are read too (detector/detector_parameters.cpp).
 struct ExclusiveHypothesisParams {
   double loop_persistence = 0.95;
   double loop_onset = 0.01;

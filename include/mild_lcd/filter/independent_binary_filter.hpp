@@ -8,7 +8,7 @@
 namespace mild {
 
 // The parameters of IndependentBinaryFilter (below), section independent_binary/. The names
-// filter/<name> of earlier versions are read too (parameters.cpp).
+// filter/<name> of earlier versions are read too (detector/detector_parameters.cpp).
 struct IndependentBinaryParams {
   double loop_persistence = 0.95;
   double no_loop_likelihood = 10.0;

@@ -1,6 +1,6 @@
 #pragma once
 
-// Where parameter values come from, apart from what they mean: the detector's (parameters.hpp) and
+// Where parameter values come from, apart from what they mean: the detector's (detector/detector_parameters.hpp) and
 // the node's settings (ros/node_settings.hpp) are read through it. Includes nothing of the pipeline.
 
 #include <cstdint>

@@ -8,7 +8,7 @@
 #include <string>
 
 #include "mild_lcd/backend/pose_graph.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
 
 namespace mild_lcd {
 

@@ -19,7 +19,7 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/filter/filter_state.hpp"
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 
 namespace mild {
 namespace {

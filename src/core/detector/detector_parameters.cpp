@@ -1,4 +1,4 @@
-#include "mild_lcd/params/parameters.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 
 #include <algorithm>
 #include <filesystem>
