@@ -79,7 +79,8 @@ PoseGraphSettings PoseGraphSettings::load(const mild::ParameterSource& source) {
       if (auto v = source.getString(name)) field = *v;
     } else if constexpr (std::is_same_v<T, int>) {
       if (auto v = source.getInt(name)) {
-        if (*v < 0 || *v > std::numeric_limits<int>::max()) throw InvalidInput("parameter ~" + std::string(name) + " is out of range");
+        if (*v < 0 || *v > std::numeric_limits<int>::max())
+          throw InvalidInput("parameter ~" + std::string(name) + " is out of range");
         field = static_cast<int>(*v);
       }
     } else {
