@@ -21,8 +21,8 @@
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
-#include "mild_lcd/detector/robot_team.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/detector/robot_team.hpp"
 
 namespace {
 

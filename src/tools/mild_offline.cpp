@@ -21,10 +21,10 @@
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
-#include "mild_lcd/detector/detector_parameters.hpp"
 #include "offline_plots.hpp"
 
 namespace fs = std::filesystem;

@@ -26,9 +26,9 @@
 #include "mild_lcd/backend/pose_graph.hpp"
 #include "mild_lcd/backend/trajectory.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
-#include "mild_lcd/detector/detector_parameters.hpp"
 #include "offline_plots.hpp"
 
 namespace {

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "test_images.hpp"
 
 namespace mild {

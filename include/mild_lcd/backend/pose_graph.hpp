@@ -35,8 +35,8 @@
 #include <Eigen/Geometry>
 
 #include "mild_lcd/backend/pose2.hpp"
-#include "mild_lcd/params/parameter_spec.hpp"
 #include "mild_lcd/params/parameter_source.hpp"
+#include "mild_lcd/params/parameter_spec.hpp"
 
 namespace mild::backend {
 

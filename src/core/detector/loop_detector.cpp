@@ -8,8 +8,8 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
-#include "mild_lcd/detector/observation.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/detector/observation.hpp"
 
 namespace mild {
 

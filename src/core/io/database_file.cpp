@@ -18,8 +18,8 @@
 #include <sstream>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/filter/filter_state.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/filter/filter_state.hpp"
 
 namespace mild {
 namespace {
