@@ -1,4 +1,4 @@
-#include "detector_diagnostics.hpp"
+#include "mild_lcd/ros/detector_diagnostics.hpp"
 
 namespace mild_lcd {
 

@@ -1,4 +1,4 @@
-#include "detector_services.hpp"
+#include "mild_lcd/ros/detector_services.hpp"
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/ros/conversions.hpp"

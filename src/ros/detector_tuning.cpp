@@ -1,4 +1,4 @@
-#include "detector_tuning.hpp"
+#include "mild_lcd/ros/detector_tuning.hpp"
 
 #include <dynamic_reconfigure/ConfigDescription.h>
 

@@ -18,21 +18,21 @@
 #include <boost/make_shared.hpp>
 #include <pluginlib/class_list_macros.hpp>
 
-#include "detector_diagnostics.hpp"
-#include "detector_services.hpp"
-#include "detector_tuning.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/database_store.hpp"
 #include "mild_lcd/ros/debug_image.hpp"
+#include "mild_lcd/ros/detector_diagnostics.hpp"
+#include "mild_lcd/ros/detector_services.hpp"
+#include "mild_lcd/ros/detector_tuning.hpp"
 #include "mild_lcd/ros/keyframe_worker.hpp"
 #include "mild_lcd/ros/node_settings.hpp"
 #include "mild_lcd/ros/periodic_task.hpp"
+#include "mild_lcd/ros/robot_inputs.hpp"
 #include "mild_lcd/ros/ros_parameter_source.hpp"
-#include "robot_inputs.hpp"
-#include "sigterm_shutdown.hpp"
+#include "mild_lcd/ros/sigterm_shutdown.hpp"
 
 namespace mild_lcd {
 namespace {

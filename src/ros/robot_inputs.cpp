@@ -1,4 +1,4 @@
-#include "robot_inputs.hpp"
+#include "mild_lcd/ros/robot_inputs.hpp"
 
 #include <algorithm>
 

@@ -1,4 +1,4 @@
-#include "sigterm_shutdown.hpp"
+#include "mild_lcd/ros/sigterm_shutdown.hpp"
 
 #include <signal.h>
 
