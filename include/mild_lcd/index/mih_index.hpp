@@ -245,6 +245,7 @@ class MihIndex {
   template <bool kPrefixes, class Visit>
   void readPlanned(const ProbePlan& plan, IdRange ids, ProbeCounters& counters, Visit&& visit) const;
   void merge(Shard& shard);
+  void placeRecent(Shard& shard, const uint32_t* start, uint32_t* skip_recent, uint32_t bound);
   // Merges the shards waiting in merge_queue_, oldest first, up to kMergeBudget entries moved (at
   // least one shard); all of them while merges are deferred.
   void mergeQueued();

@@ -113,6 +113,8 @@ class KeyframeDatabase {
   void clear();
 
  private:
+  // Phi' / (|F_query| |F_keyframe|): similarity/normalize_by_feature_counts.
+  void divideByFeatureCounts(std::vector<double>& similarity, size_t query_features) const;
   struct IndexScratch;
   using Vote = detail::DatabaseVote;
   int fullDistance(const Descriptor& q, FeatureId f) const;

@@ -216,6 +216,36 @@ uint32_t MihIndex::roomAfter(uint32_t entries) {
   return entries / 8 + 1;
 }
 
+// The merge's second half: each recent entry written after its bucket's settled ones that stay (the
+// oldest skip_recent[s] of a bucket over the bound dropped), then every slot's run closed at `start`.
+void MihIndex::placeRecent(Shard& shard, const uint32_t* start, uint32_t* skip_recent, uint32_t bound) {
+  const size_t slots = slotCount(shard);
+  const bool prefixes = params_.inline_prefixes;
+  Slot* const slot_at = shard.slots.data();
+  FeatureId* const ids = shard.ids.data();
+  uint64_t* const prefix_at = prefixes ? shard.prefixes.data() : nullptr;
+  for (const Link& link : shard.recent) {
+    Slot& slot = slot_at[link.slot];
+    if (slot.recent == kDiscarded) continue;
+    if (bound > 0 && skip_recent[link.slot] > 0) {
+      --skip_recent[link.slot];
+      continue;
+    }
+    if (prefixes) prefix_at[slot.offset] = link.prefix;
+    ids[slot.offset++] = link.id;
+  }
+  for (size_t s = 0; s < slots; ++s) {
+    Slot& slot = slot_at[s];
+    slot.end = slot.offset;  // the write cursor, past the bucket's entries
+    slot.offset = start[s];
+    if (slot.recent != kDiscarded) {
+      slot.recent = kNone;
+      slot.count = slot.end - slot.offset;
+    }
+  }
+  slot_at[slots].offset = slot_at[slots].end = start[slots];
+}
+
 void MihIndex::merge(Shard& shard) {
   // A counting sort of the recent entries by bucket: they are in insertion order, i.e. ascending
   // ids, so scattering them in that order keeps every bucket's ids ascending. Every pass over the
@@ -274,28 +304,7 @@ void MihIndex::merge(Shard& shard) {
   if (prefixes) shiftRuns(shard.prefixes.data(), from, kept, start, slots);
   shard.ids.resize(total);  // shrinks after discards or evictions; the room stays
   if (prefixes) shard.prefixes.resize(total);
-  FeatureId* const ids = shard.ids.data();
-  uint64_t* const prefix_at = prefixes ? shard.prefixes.data() : nullptr;
-  for (const Link& link : shard.recent) {
-    Slot& slot = slot_at[link.slot];
-    if (slot.recent == kDiscarded) continue;
-    if (bound > 0 && skip_recent[link.slot] > 0) {
-      --skip_recent[link.slot];
-      continue;
-    }
-    if (prefixes) prefix_at[slot.offset] = link.prefix;
-    ids[slot.offset++] = link.id;
-  }
-  for (size_t s = 0; s < slots; ++s) {
-    Slot& slot = slot_at[s];
-    slot.end = slot.offset;  // the write cursor, past the bucket's entries
-    slot.offset = start[s];
-    if (slot.recent != kDiscarded) {
-      slot.recent = kNone;
-      slot.count = slot.end - slot.offset;
-    }
-  }
-  slot_at[slots].offset = slot_at[slots].end = start[slots];
+  placeRecent(shard, start, skip_recent, bound);
   shard.recent.clear();
   if (shard.recent.capacity() > 2 * mergeThreshold(shard)) {  // after a bulk load: give the room back
     std::vector<Link>().swap(shard.recent);

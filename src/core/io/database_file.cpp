@@ -295,7 +295,17 @@ void saveDetector(const LoopDetector& detector, const ConfinedFile& file) {
   ::fsync(file.folder());  // the rename itself must reach the disk too
 }
 
-DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin) {
+namespace {
+
+// The payload a file's header announces, once the header, its checksums and the payload's size are
+// checked; its format version beside it.
+struct CheckedPayload {
+  uint32_t version = 0;
+  const uint8_t* data = nullptr;
+  size_t size = 0;
+};
+
+CheckedPayload checkedPayload(const uint8_t* data, size_t size, const std::string& origin) {
   if (size == 0) throw InvalidInput(origin + ": empty file, not a mild_lcd database");
   if (size < kHeaderBytes || std::memcmp(data, kMagic, sizeof(kMagic)) != 0) {
     throw InvalidInput(origin + ": not a mild_lcd database (no MILDLCD header)");
@@ -330,8 +340,70 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
     throw InvalidInput(origin + ": corrupt data (checksum mismatch)");
   }
 #endif
+  return {version, payload, static_cast<size_t>(payload_size)};
+}
 
-  Cursor in(payload, payload_size, origin);
+// Bytes of one keyframe record before its features, by format version.
+size_t recordBytes(uint32_t version) { return 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0); }
+
+void readKeyframe(Cursor& in, uint32_t version, int descriptor_width, const std::string& origin, KeyframeRecord& r,
+                  DescriptorList& descriptors) {
+  const size_t descriptor_bytes = static_cast<size_t>(descriptor_width);
+  r.id = in.get<uint64_t>("a keyframe id");
+  r.stamp = in.get<double>("a keyframe stamp");
+  if (version >= 2) r.session = in.get<uint32_t>("a keyframe session");
+  if (version >= 3) {
+    r.camera.fx = in.get<double>("a keyframe's camera");
+    r.camera.fy = in.get<double>("a keyframe's camera");
+    r.camera.cx = in.get<double>("a keyframe's camera");
+    r.camera.cy = in.get<double>("a keyframe's camera");
+    if (!r.camera.wellFormed()) {
+      throw InvalidInput(origin + ": corrupt: keyframe " + std::to_string(r.id) + " has malformed camera intrinsics");
+    }
+  }
+  const size_t features = in.count(kKeypointBytes + descriptor_bytes, "a keyframe's feature count");
+  r.keypoints.resize(features);
+  for (cv::KeyPoint& p : r.keypoints) {
+    p.pt.x = in.get<float>("a keypoint");
+    p.pt.y = in.get<float>("a keypoint");
+    p.size = in.get<float>("a keypoint");
+    p.angle = in.get<float>("a keypoint");
+    p.response = in.get<float>("a keypoint");
+    p.octave = in.get<int32_t>("a keypoint");
+  }
+  const uint8_t* bytes = in.take(features * descriptor_bytes, "descriptors");
+  descriptors = descriptorsFromBytes(bytes, features * descriptor_bytes, descriptor_width);
+}
+
+void readFilterState(Cursor& in, uint32_t version, const std::string& origin, DetectorState& state) {
+  if (version == 1) {
+    // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, without
+    // the count: that filter's state (filter_state.hpp) once the count is put in front.
+    const size_t posterior = in.count(sizeof(double), "the filter state size");
+    const uint8_t* beliefs = in.take(posterior * sizeof(double) + sizeof(double), "the filter state");
+    std::vector<double> values(posterior);
+    double no_loop = 0.0;
+    if (posterior > 0) std::memcpy(values.data(), beliefs, posterior * sizeof(double));
+    std::memcpy(&no_loop, beliefs + posterior * sizeof(double), sizeof(double));
+    state.filter_name = "exclusive_hypotheses";
+    state.filter_state = packFilterState(values, {no_loop});
+    return;
+  }
+  const size_t name = in.count(1, "the filter name");
+  const uint8_t* name_chars = in.take(name, "the filter name");
+  state.filter_name.assign(reinterpret_cast<const char*>(name_chars), name);
+  const uint64_t bytes = in.get<uint64_t>("the filter state size");
+  if (bytes > in.remaining()) throw InvalidInput(origin + ": corrupt: the filter state runs past the end");
+  const uint8_t* filter_state = in.take(static_cast<size_t>(bytes), "the filter state");
+  state.filter_state.assign(filter_state, filter_state + bytes);
+}
+
+}  // namespace
+
+DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin) {
+  const CheckedPayload payload = checkedPayload(data, size, origin);
+  const uint32_t version = payload.version;
+  Cursor in(payload.data, payload.size, origin);
   DetectorState state;
   const size_t text = in.count(1, "the parameters");
   const uint8_t* chars = in.take(text, "the parameters");
@@ -344,60 +416,15 @@ DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::st
     }
     state.descriptor_bytes = static_cast<int>(bits / 8);
   }
-  const size_t descriptor_bytes = static_cast<size_t>(state.descriptor_bytes);
   state.next_id = in.get<uint64_t>("the next id");
   state.session_start = in.get<uint32_t>("the session start");
-  const size_t record_bytes = 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0);
-  const size_t keyframes = in.count(record_bytes, "the keyframe count");
+  const size_t keyframes = in.count(recordBytes(version), "the keyframe count");
   state.records.resize(keyframes);
   state.descriptors.resize(keyframes);
   for (size_t k = 0; k < keyframes; ++k) {
-    KeyframeRecord& r = state.records[k];
-    r.id = in.get<uint64_t>("a keyframe id");
-    r.stamp = in.get<double>("a keyframe stamp");
-    if (version >= 2) r.session = in.get<uint32_t>("a keyframe session");
-    if (version >= 3) {
-      r.camera.fx = in.get<double>("a keyframe's camera");
-      r.camera.fy = in.get<double>("a keyframe's camera");
-      r.camera.cx = in.get<double>("a keyframe's camera");
-      r.camera.cy = in.get<double>("a keyframe's camera");
-      if (!r.camera.wellFormed()) {
-        throw InvalidInput(origin + ": corrupt: keyframe " + std::to_string(r.id) + " has malformed camera intrinsics");
-      }
-    }
-    const size_t features = in.count(kKeypointBytes + descriptor_bytes, "a keyframe's feature count");
-    r.keypoints.resize(features);
-    for (cv::KeyPoint& p : r.keypoints) {
-      p.pt.x = in.get<float>("a keypoint");
-      p.pt.y = in.get<float>("a keypoint");
-      p.size = in.get<float>("a keypoint");
-      p.angle = in.get<float>("a keypoint");
-      p.response = in.get<float>("a keypoint");
-      p.octave = in.get<int32_t>("a keypoint");
-    }
-    const uint8_t* descriptors = in.take(features * descriptor_bytes, "descriptors");
-    state.descriptors[k] = descriptorsFromBytes(descriptors, features * descriptor_bytes, state.descriptor_bytes);
+    readKeyframe(in, version, state.descriptor_bytes, origin, state.records[k], state.descriptors[k]);
   }
-  if (version == 1) {
-    // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, without
-    // the count: that filter's state (filter_state.hpp) once the count is put in front.
-    const size_t posterior = in.count(sizeof(double), "the filter state size");
-    const uint8_t* beliefs = in.take(posterior * sizeof(double) + sizeof(double), "the filter state");
-    std::vector<double> values(posterior);
-    double no_loop = 0.0;
-    if (posterior > 0) std::memcpy(values.data(), beliefs, posterior * sizeof(double));
-    std::memcpy(&no_loop, beliefs + posterior * sizeof(double), sizeof(double));
-    state.filter_name = "exclusive_hypotheses";
-    state.filter_state = packFilterState(values, {no_loop});
-  } else {
-    const size_t name = in.count(1, "the filter name");
-    const uint8_t* name_chars = in.take(name, "the filter name");
-    state.filter_name.assign(reinterpret_cast<const char*>(name_chars), name);
-    const uint64_t bytes = in.get<uint64_t>("the filter state size");
-    if (bytes > in.remaining()) throw InvalidInput(origin + ": corrupt: the filter state runs past the end");
-    const uint8_t* filter_state = in.take(static_cast<size_t>(bytes), "the filter state");
-    state.filter_state.assign(filter_state, filter_state + bytes);
-  }
+  readFilterState(in, version, origin, state);
   if (in.remaining() != 0) throw InvalidInput(origin + ": corrupt: " + std::to_string(in.remaining()) + " stray bytes");
   return state;
 }

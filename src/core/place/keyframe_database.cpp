@@ -71,6 +71,45 @@ class VoteAccumulator {
   uint32_t feature_counter_ = 0;
 };
 
+// How many query features matched each of the first `keyframes` keyframes (a feature's several
+// votes for one keyframe count once): the near-past band's evidence. vote_end[i] ends feature i's votes.
+std::vector<uint32_t> matchedFeatureCounts(const std::vector<Vote>& votes, const std::vector<size_t>& vote_end,
+                                           KeyframeIndex keyframes) {
+  std::vector<uint32_t> matched(keyframes, 0);
+  std::vector<uint32_t> last_feature(keyframes, 0);
+  size_t begin = 0;
+  for (size_t i = 0; i < vote_end.size(); ++i) {
+    for (size_t v = begin; v < vote_end[i]; ++v) {
+      const KeyframeIndex k = votes[v].keyframe;
+      if (last_feature[k] != i + 1) {
+        last_feature[k] = static_cast<uint32_t>(i + 1);
+        ++matched[k];
+      }
+    }
+    begin = vote_end[i];
+  }
+  return matched;
+}
+
+// The similarity of each of the first `keyframes` keyframes from the votes below it, feature by
+// feature (VoteAccumulator's burstiness weighting).
+std::vector<double> similarityFromVotes(const SimilarityParams& params, const std::vector<Vote>& votes,
+                                        const std::vector<size_t>& vote_end, KeyframeIndex keyframes) {
+  std::vector<double> similarity(keyframes, 0.0);
+  VoteAccumulator accumulator(params, keyframes, similarity);
+  std::vector<Vote> feature_votes;
+  size_t begin = 0;
+  for (size_t i = 0; i < vote_end.size(); ++i) {
+    feature_votes.clear();
+    for (size_t v = begin; v < vote_end[i]; ++v) {
+      if (votes[v].keyframe < keyframes) feature_votes.push_back(votes[v]);
+    }
+    begin = vote_end[i];
+    accumulator.addFeatureVotes(feature_votes);
+  }
+  return similarity;
+}
+
 }  // namespace
 
 QueryStats& QueryStats::operator+=(const QueryStats& o) {
@@ -341,42 +380,20 @@ QueryResult KeyframeDatabase::query(const DescriptorList& q, KeyframeIndex candi
   stats.buckets_probed += located.buckets_probed;
 
   if (near_past != nullptr) {
-    std::vector<uint32_t> matched(n_votes, 0);
-    std::vector<uint32_t> last_feature(n_votes, 0);
-    size_t begin = 0;
-    for (size_t i = 0; i < vote_end.size(); ++i) {
-      for (size_t v = begin; v < vote_end[i]; ++v) {
-        const KeyframeIndex k = votes[v].keyframe;
-        if (last_feature[k] != i + 1) {
-          last_feature[k] = static_cast<uint32_t>(i + 1);
-          ++matched[k];
-        }
-      }
-      begin = vote_end[i];
-    }
-    result.near_past = nearPastBand(matched, n, *near_past);
+    result.near_past = nearPastBand(matchedFeatureCounts(votes, vote_end, n_votes), n, *near_past);
     n -= result.near_past;
   }
 
-  result.similarity.assign(n, 0.0);
-  VoteAccumulator accumulator(sp, n, result.similarity);
-  size_t begin = 0;
-  for (size_t i = 0; i < vote_end.size(); ++i) {
-    feature_votes.clear();
-    for (size_t v = begin; v < vote_end[i]; ++v) {
-      if (votes[v].keyframe < n) feature_votes.push_back(votes[v]);
-    }
-    begin = vote_end[i];
-    accumulator.addFeatureVotes(feature_votes);
-  }
-
-  if (sp.normalize_by_feature_counts) {
-    for (KeyframeIndex k = 0; k < n; ++k) {
-      const size_t nk = featureCount(k);
-      if (nk > 0) result.similarity[k] /= static_cast<double>(q.size()) * static_cast<double>(nk);
-    }
-  }
+  result.similarity = similarityFromVotes(sp, votes, vote_end, n);
+  if (sp.normalize_by_feature_counts) divideByFeatureCounts(result.similarity, q.size());
   return result;
+}
+
+void KeyframeDatabase::divideByFeatureCounts(std::vector<double>& similarity, size_t query_features) const {
+  for (KeyframeIndex k = 0; k < similarity.size(); ++k) {
+    const size_t nk = featureCount(k);
+    if (nk > 0) similarity[k] /= static_cast<double>(query_features) * static_cast<double>(nk);
+  }
 }
 
 QueryResult KeyframeDatabase::insertAndQuery(const DescriptorList& descriptors, KeyframeIndex candidate_limit,

@@ -153,6 +153,71 @@ std::vector<cv::Point2f> normalised(const std::vector<cv::Point2f>& points, cons
   return out;
 }
 
+// The matched keypoints' image positions, query side and train side, in match order.
+void matchedPoints(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
+                   const std::vector<FeatureMatch>& matches, std::vector<cv::Point2f>& p1,
+                   std::vector<cv::Point2f>& p2) {
+  p1.reserve(matches.size());
+  p2.reserve(matches.size());
+  for (const FeatureMatch& m : matches) {
+    if (m.query < 0 || m.train < 0 || static_cast<size_t>(m.query) >= query.size() ||
+        static_cast<size_t>(m.train) >= train.size()) {
+      throw InvalidInput("match refers to keypoint " + std::to_string(m.query) + "/" + std::to_string(m.train) +
+                         " outside the " + std::to_string(query.size()) + "/" + std::to_string(train.size()) +
+                         " given");
+    }
+    p1.push_back(query[m.query].pt);
+    p2.push_back(train[m.train].pt);
+  }
+}
+
+// PROSAC samples the best-ranked matches first: nearest descriptors first.
+void orderByDistance(std::vector<FeatureMatch>& matches, std::vector<cv::Point2f>& p1, std::vector<cv::Point2f>& p2) {
+  std::vector<size_t> order(matches.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return matches[a].distance < matches[b].distance; });
+  std::vector<FeatureMatch> sorted;
+  std::vector<cv::Point2f> s1, s2;
+  for (size_t i : order) {
+    sorted.push_back(matches[i]);
+    s1.push_back(p1[i]);
+    s2.push_back(p2[i]);
+  }
+  matches = std::move(sorted);
+  p1 = std::move(s1);
+  p2 = std::move(s2);
+}
+
+// The two-view model (E with both cameras known, else F) and its inlier mask; an empty model for
+// degenerate input (e.g. all points identical).
+cv::Mat fitTwoViewModel(const std::vector<cv::Point2f>& p1, const std::vector<cv::Point2f>& p2,
+                        const CameraIntrinsics& query_camera, const CameraIntrinsics& train_camera,
+                        const VerificationParams& params, cv::Mat& mask) {
+  const bool essential = query_camera.known() && train_camera.known();
+  // Two different cameras (e.g. two robots): fit E to normalised image coordinates, with the
+  // threshold scaled as OpenCV does for one camera (by the mean focal length).
+  const bool two_cameras = essential && query_camera != train_camera;
+  const double mean_focal = (query_camera.fx + query_camera.fy + train_camera.fx + train_camera.fy) / 4.0;
+  const int method = robustMethodFlag(params.method);
+  cv::Mat model;
+  try {
+    if (two_cameras) {
+      model = cv::findEssentialMat(normalised(p1, query_camera), normalised(p2, train_camera), cv::Matx33d::eye(),
+                                   method, params.confidence, params.ransac_threshold / mean_focal, mask);
+    } else if (essential) {
+      model =
+          cv::findEssentialMat(p1, p2, query_camera.matrix(), method, params.confidence, params.ransac_threshold, mask);
+    } else {
+      model = cv::findFundamentalMat(p1, p2, method, params.ransac_threshold, params.confidence, params.max_iterations,
+                                     mask);
+    }
+  } catch (const cv::Exception&) {
+    model.release();
+  }
+  return model;
+}
+
 }  // namespace
 
 GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& query,
@@ -166,55 +231,10 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   if (out.matches.size() < static_cast<size_t>(kMinimalMatches)) return out;
 
   std::vector<cv::Point2f> p1, p2;
-  p1.reserve(out.matches.size());
-  p2.reserve(out.matches.size());
-  for (const FeatureMatch& m : out.matches) {
-    if (m.query < 0 || m.train < 0 || static_cast<size_t>(m.query) >= query.size() ||
-        static_cast<size_t>(m.train) >= train.size()) {
-      throw InvalidInput("match refers to keypoint " + std::to_string(m.query) + "/" + std::to_string(m.train) +
-                         " outside the " + std::to_string(query.size()) + "/" + std::to_string(train.size()) +
-                         " given");
-    }
-    p1.push_back(query[m.query].pt);
-    p2.push_back(train[m.train].pt);
-  }
-  const bool essential = query_camera.known() && train_camera.known();
-  // Two different cameras (e.g. two robots): fit E to normalised image coordinates, with the
-  // threshold scaled as OpenCV does for one camera (by the mean focal length).
-  const bool two_cameras = essential && query_camera != train_camera;
-  const double mean_focal = (query_camera.fx + query_camera.fy + train_camera.fx + train_camera.fy) / 4.0;
-  const int method = robustMethodFlag(params_.method);
-  if (method == cv::USAC_PROSAC) {  // PROSAC samples the best-ranked matches first: nearest descriptors first
-    std::vector<size_t> order(out.matches.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(),
-                     [&](size_t a, size_t b) { return out.matches[a].distance < out.matches[b].distance; });
-    std::vector<FeatureMatch> sorted;
-    std::vector<cv::Point2f> s1, s2;
-    for (size_t i : order) {
-      sorted.push_back(out.matches[i]);
-      s1.push_back(p1[i]);
-      s2.push_back(p2[i]);
-    }
-    out.matches = std::move(sorted);
-    p1 = std::move(s1);
-    p2 = std::move(s2);
-  }
+  matchedPoints(query, train, out.matches, p1, p2);
+  if (robustMethodFlag(params_.method) == cv::USAC_PROSAC) orderByDistance(out.matches, p1, p2);
   cv::Mat mask;
-  try {
-    if (two_cameras) {
-      out.model = cv::findEssentialMat(normalised(p1, query_camera), normalised(p2, train_camera), cv::Matx33d::eye(),
-                                       method, params_.confidence, params_.ransac_threshold / mean_focal, mask);
-    } else if (essential) {
-      out.model = cv::findEssentialMat(p1, p2, query_camera.matrix(), method, params_.confidence,
-                                       params_.ransac_threshold, mask);
-    } else {
-      out.model = cv::findFundamentalMat(p1, p2, method, params_.ransac_threshold, params_.confidence,
-                                         params_.max_iterations, mask);
-    }
-  } catch (const cv::Exception&) {
-    out.model.release();  // degenerate input (e.g. all points identical): no model, not verified
-  }
+  out.model = fitTwoViewModel(p1, p2, query_camera, train_camera, params_, mask);
   if (out.model.empty() || out.model.rows != 3 || mask.empty()) {
     out.model.release();
     return out;
@@ -241,12 +261,14 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   // candidate was a fifth of verification on real frames, for figures nothing reads.
   out.verification.coverage = std::min(inlierCoverage(query, q_in), inlierCoverage(train, t_in));
   out.verification.homography_share = homographyShare(q_in, t_in);
+  const bool essential = query_camera.known() && train_camera.known();
   if (!essential) return out;
   if (!depth_in.empty()) {
     out.verification.pose = relativePoseFromDepth(q_in, depth_in, t_in, query_camera.matrix(), train_camera.matrix(),
                                                   params_.pnp_threshold, params_.min_inliers);
   }
   if (!out.verification.pose.valid) {  // no depth, or too little of it: the direction of the baseline
+    const bool two_cameras = query_camera != train_camera;
     out.verification.pose =
         two_cameras ? relativePoseFromEssential(out.model, normalised(q_in, query_camera),
                                                 normalised(t_in, train_camera), cv::Matx33d::eye(), params_.min_inliers)
