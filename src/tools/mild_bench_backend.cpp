@@ -262,6 +262,175 @@ void printRow(long sent, const Status& s) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The benchmark.
+
+// Waits for a back-end on both topics and for its first diagnostics.
+void waitForBackend(const ros::Publisher& odom_pub, const ros::Publisher& loop_pub, BackendStatus& status) {
+  const ros::WallTime connect_end = ros::WallTime::now() + ros::WallDuration(60.0);
+  while (ros::ok() && ros::WallTime::now() < connect_end &&
+         (odom_pub.getNumSubscribers() == 0 || loop_pub.getNumSubscribers() == 0)) {
+    ros::WallDuration(0.05).sleep();
+  }
+  if (odom_pub.getNumSubscribers() == 0 || loop_pub.getNumSubscribers() == 0) {
+    throw std::runtime_error("no back-end subscribes to " + odom_pub.getTopic() + " and " + loop_pub.getTopic() +
+                             " (60 s)");
+  }
+  if (!status.waitForFirst(30.0)) {
+    throw std::runtime_error("no diagnostics status whose name ends with \"pose graph\" on /diagnostics (30 s)");
+  }
+}
+
+void printIntro(const Options& opt, const Run& run) {
+  std::printf(
+      "example back-end under load: %d keyframes at %.0f Hz (wall clock), laps of a %.0f m x %.0f m rectangle "
+      "at %.0f m per keyframe (%d laps), drifting odometry, %zu loops (nearest keyframe of an earlier lap "
+      "within %.0f m)\n\n",
+      opt.keyframes, opt.rate, kLength, kWidth, kStep, run.lap.back() + 1, run.loops, kLoopRadius);
+  printHeader();
+}
+
+nav_msgs::Odometry odometryMsg(const ros::Time& stamp, const Pose2& pose) {
+  nav_msgs::Odometry odom;
+  odom.header.stamp = stamp;
+  odom.header.frame_id = "odom";
+  odom.child_frame_id = "base_link";
+  odom.pose.pose.position.x = pose.x;
+  odom.pose.pose.position.y = pose.y;
+  odom.pose.pose.orientation = quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ())));
+  return odom;
+}
+
+// Keyframe k's LoopClosure: its loop's candidate, if it has one, accepted and verified with its true pose.
+mild_lcd::LoopClosure loopClosureMsg(const Run& run, size_t k, const ros::Time& stamp,
+                                     const std::vector<ros::Time>& stamps) {
+  mild_lcd::LoopClosure closure;
+  closure.header.stamp = stamp;
+  closure.header.frame_id = "camera";
+  closure.query_id = k;
+  closure.query_session = 0;
+  closure.database_size = static_cast<int32_t>(k + 1);
+  if (run.candidate[k] >= 0) {
+    const size_t j = static_cast<size_t>(run.candidate[k]);
+    mild_lcd::LoopCandidate c;
+    c.id = j;
+    c.session = 0;
+    c.stamp = stamps[j];
+    c.probability = c.filter_probability = 0.99;
+    c.accepted = c.verified = true;
+    c.inliers = c.matches = c.pose_inliers = 100;
+    c.inlier_ratio = 1.0;
+    c.reprojection_error = 1.0;
+    setRelativePose(run.truth[k], run.truth[j], c);
+    closure.candidates.push_back(c);
+  }
+  return closure;
+}
+
+struct Sending {
+  long sent = 0;
+  double seconds = 0.0;     // from the first keyframe to after the last
+  ros::WallTime last_sent;  // after the last keyframe
+};
+
+Sending sendKeyframes(const Options& opt, const Run& run, const ros::Publisher& odom_pub,
+                      const ros::Publisher& loop_pub, const BackendStatus& status) {
+  // A detector answers a keyframe after its odometry has arrived: the LoopClosure follows a little later.
+  const ros::WallDuration lead(std::min(0.005, 0.25 / opt.rate));
+  std::vector<ros::Time> stamps;
+  stamps.reserve(run.truth.size());
+  ros::WallRate rate(opt.rate);
+  const ros::WallTime start = ros::WallTime::now();
+  long sent = 0;
+  for (size_t k = 0; k < run.truth.size() && ros::ok(); ++k) {
+    const ros::Time stamp = ros::Time::now();
+    stamps.push_back(stamp);
+    odom_pub.publish(odometryMsg(stamp, run.odometry[k]));
+    lead.sleep();
+
+    loop_pub.publish(loopClosureMsg(run, k, stamp, stamps));
+    ++sent;
+
+    if (sent % opt.sample_every == 0) {
+      if (const auto s = status.latest()) printRow(sent, *s);
+    }
+    rate.sleep();
+  }
+  const ros::WallTime last_sent = ros::WallTime::now();
+  return {sent, (last_sent - start).toSec(), last_sent};
+}
+
+// Settled: a status from after the last keyframe (the updater reports every second) with none
+// waiting, and every keyframe received, or the received count unchanged for 3 s (the rest is lost).
+void waitUntilSettled(const Options& opt, const Sending& sending, const BackendStatus& status) {
+  const ros::WallTime settle_end = sending.last_sent + ros::WallDuration(opt.settle);
+  long long last_received = -1;
+  ros::WallTime received_since = ros::WallTime::now();
+  std::optional<Status> final_status;
+  ros::WallTime arrived;
+  while (ros::ok() && ros::WallTime::now() < settle_end) {
+    final_status = status.latest(&arrived);
+    const long long received = count(*final_status, "keyframes received");
+    if (received != last_received) {
+      last_received = received;
+      received_since = ros::WallTime::now();
+    }
+    const bool fresh = arrived > sending.last_sent + ros::WallDuration(1.0);
+    if (fresh && count(*final_status, "keyframes waiting") == 0 &&
+        (received == sending.sent || (ros::WallTime::now() - received_since).toSec() > 3.0)) {
+      break;
+    }
+    ros::WallDuration(0.1).sleep();
+  }
+}
+
+// The back-end's account of the keyframes; -1 for a missing entry.
+struct KeyframeCounts {
+  long long received, in_graph, waiting, dropped;
+};
+
+KeyframeCounts keyframeCounts(const Status& s) {
+  return {count(s, "keyframes received"), count(s, "keyframes in graph"), count(s, "keyframes waiting"),
+          count(s, "keyframes dropped")};
+}
+
+void printSummary(const Run& run, const Sending& sending, const Status& s, const ros::WallTime& arrived) {
+  const KeyframeCounts c = keyframeCounts(s);
+  const double silent_s = (ros::WallTime::now() - arrived).toSec();
+  std::printf("\nsent %ld keyframes in %.1f s (%.1f Hz), %zu of %zu with a loop\n", sending.sent, sending.seconds,
+              sending.sent / sending.seconds, run.loops, run.truth.size());
+  std::printf("back-end: received %lld, in graph %lld, waiting %lld, dropped %lld (%s)\n", c.received, c.in_graph,
+              c.waiting, c.dropped, dropCauses(s).c_str());
+  std::printf("rejected: odometry %s, tf %s; loops kept %s, rejected %s, refused %s, skipped %s\n",
+              text(s, "odometry rejected").c_str(), text(s, "tf rejected").c_str(), text(s, "loops kept").c_str(),
+              text(s, "loops rejected").c_str(), text(s, "loops refused").c_str(), text(s, "loops skipped").c_str());
+  std::printf(
+      "solves %s (failed %s), chains %s; update ms median %s, p95 %s (last 1000 updates), last update %s "
+      "keyframes\n",
+      text(s, "solves").c_str(), text(s, "solves failed").c_str(), text(s, "chains").c_str(),
+      text(s, "update ms median").c_str(), text(s, "update ms p95").c_str(), text(s, "update keyframes").c_str());
+  if (silent_s > 5.0) {
+    std::printf("the back-end's diagnostics stopped %.0f s ago: did its nodelet manager die?\n", silent_s);
+  }
+}
+
+// Whether the back-end received every keyframe sent and accounts for each; prints FAIL lines or OK.
+bool checkAccounting(long sent, const Status& s) {
+  const KeyframeCounts c = keyframeCounts(s);
+  bool ok = true;
+  if (c.received != sent) {
+    std::printf("FAIL: the back-end received %lld of %ld keyframes (the rest were lost before it counted them)\n",
+                c.received, sent);
+    ok = false;
+  }
+  if (c.received < 0 || c.in_graph < 0 || c.waiting < 0 || c.dropped < 0 ||
+      c.received != c.in_graph + c.waiting + c.dropped) {
+    std::printf("FAIL: received %lld != in graph %lld + waiting %lld + dropped %lld\n", c.received, c.in_graph,
+                c.waiting, c.dropped);
+    ok = false;
+  }
+  if (ok) std::printf("OK: every keyframe received and accounted for\n");
+  return ok;
+}
 
 int run(const Options& opt) {
   ros::NodeHandle nh;
@@ -275,134 +444,16 @@ int run(const Options& opt) {
   ros::AsyncSpinner spinner(1);
   spinner.start();
 
-  const ros::WallTime connect_end = ros::WallTime::now() + ros::WallDuration(60.0);
-  while (ros::ok() && ros::WallTime::now() < connect_end &&
-         (odom_pub.getNumSubscribers() == 0 || loop_pub.getNumSubscribers() == 0)) {
-    ros::WallDuration(0.05).sleep();
-  }
-  if (odom_pub.getNumSubscribers() == 0 || loop_pub.getNumSubscribers() == 0) {
-    throw std::runtime_error("no back-end subscribes to " + odom_pub.getTopic() + " and " + loop_pub.getTopic() +
-                             " (60 s)");
-  }
-  if (!status.waitForFirst(30.0)) {
-    throw std::runtime_error("no diagnostics status whose name ends with \"pose graph\" on /diagnostics (30 s)");
-  }
-
-  std::printf(
-      "example back-end under load: %d keyframes at %.0f Hz (wall clock), laps of a %.0f m x %.0f m rectangle "
-      "at %.0f m per keyframe (%d laps), drifting odometry, %zu loops (nearest keyframe of an earlier lap "
-      "within %.0f m)\n\n",
-      opt.keyframes, opt.rate, kLength, kWidth, kStep, run.lap.back() + 1, run.loops, kLoopRadius);
-  printHeader();
-
-  // A detector answers a keyframe after its odometry has arrived: the LoopClosure follows a little later.
-  const ros::WallDuration lead(std::min(0.005, 0.25 / opt.rate));
-  std::vector<ros::Time> stamps;
-  stamps.reserve(run.truth.size());
-  ros::WallRate rate(opt.rate);
-  const ros::WallTime start = ros::WallTime::now();
-  long sent = 0;
-  for (size_t k = 0; k < run.truth.size() && ros::ok(); ++k) {
-    const ros::Time stamp = ros::Time::now();
-    stamps.push_back(stamp);
-    nav_msgs::Odometry odom;
-    odom.header.stamp = stamp;
-    odom.header.frame_id = "odom";
-    odom.child_frame_id = "base_link";
-    odom.pose.pose.position.x = run.odometry[k].x;
-    odom.pose.pose.position.y = run.odometry[k].y;
-    odom.pose.pose.orientation =
-        quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(run.odometry[k].yaw, Eigen::Vector3d::UnitZ())));
-    odom_pub.publish(odom);
-    lead.sleep();
-
-    mild_lcd::LoopClosure closure;
-    closure.header.stamp = stamp;
-    closure.header.frame_id = "camera";
-    closure.query_id = k;
-    closure.query_session = 0;
-    closure.database_size = static_cast<int32_t>(k + 1);
-    if (run.candidate[k] >= 0) {
-      const size_t j = static_cast<size_t>(run.candidate[k]);
-      mild_lcd::LoopCandidate c;
-      c.id = j;
-      c.session = 0;
-      c.stamp = stamps[j];
-      c.probability = c.filter_probability = 0.99;
-      c.accepted = c.verified = true;
-      c.inliers = c.matches = c.pose_inliers = 100;
-      c.inlier_ratio = 1.0;
-      c.reprojection_error = 1.0;
-      setRelativePose(run.truth[k], run.truth[j], c);
-      closure.candidates.push_back(c);
-    }
-    loop_pub.publish(closure);
-    ++sent;
-
-    if (sent % opt.sample_every == 0) {
-      if (const auto s = status.latest()) printRow(sent, *s);
-    }
-    rate.sleep();
-  }
-  const ros::WallTime last_sent = ros::WallTime::now();
-  const double send_s = (last_sent - start).toSec();
-
-  // Settled: a status from after the last keyframe (the updater reports every second) with none
-  // waiting, and every keyframe received, or the received count unchanged for 3 s (the rest is lost).
-  const ros::WallTime settle_end = last_sent + ros::WallDuration(opt.settle);
-  long long last_received = -1;
-  ros::WallTime received_since = ros::WallTime::now();
-  std::optional<Status> final_status;
+  waitForBackend(odom_pub, loop_pub, status);
+  printIntro(opt, run);
+  const Sending sending = sendKeyframes(opt, run, odom_pub, loop_pub, status);
+  waitUntilSettled(opt, sending, status);
   ros::WallTime arrived;
-  while (ros::ok() && ros::WallTime::now() < settle_end) {
-    final_status = status.latest(&arrived);
-    const long long received = count(*final_status, "keyframes received");
-    if (received != last_received) {
-      last_received = received;
-      received_since = ros::WallTime::now();
-    }
-    const bool fresh = arrived > last_sent + ros::WallDuration(1.0);
-    if (fresh && count(*final_status, "keyframes waiting") == 0 &&
-        (received == sent || (ros::WallTime::now() - received_since).toSec() > 3.0)) {
-      break;
-    }
-    ros::WallDuration(0.1).sleep();
-  }
-  final_status = status.latest(&arrived);
+  const std::optional<Status> final_status = status.latest(&arrived);
   const Status& s = *final_status;
-  printRow(sent, s);
-
-  const long long received = count(s, "keyframes received"), in_graph = count(s, "keyframes in graph"),
-                  waiting = count(s, "keyframes waiting"), dropped = count(s, "keyframes dropped");
-  const double silent_s = (ros::WallTime::now() - arrived).toSec();
-  std::printf("\nsent %ld keyframes in %.1f s (%.1f Hz), %zu of %zu with a loop\n", sent, send_s, sent / send_s,
-              run.loops, run.truth.size());
-  std::printf("back-end: received %lld, in graph %lld, waiting %lld, dropped %lld (%s)\n", received, in_graph, waiting,
-              dropped, dropCauses(s).c_str());
-  std::printf("rejected: odometry %s, tf %s; loops kept %s, rejected %s, refused %s, skipped %s\n",
-              text(s, "odometry rejected").c_str(), text(s, "tf rejected").c_str(), text(s, "loops kept").c_str(),
-              text(s, "loops rejected").c_str(), text(s, "loops refused").c_str(), text(s, "loops skipped").c_str());
-  std::printf(
-      "solves %s (failed %s), chains %s; update ms median %s, p95 %s (last 1000 updates), last update %s "
-      "keyframes\n",
-      text(s, "solves").c_str(), text(s, "solves failed").c_str(), text(s, "chains").c_str(),
-      text(s, "update ms median").c_str(), text(s, "update ms p95").c_str(), text(s, "update keyframes").c_str());
-  if (silent_s > 5.0) {
-    std::printf("the back-end's diagnostics stopped %.0f s ago: did its nodelet manager die?\n", silent_s);
-  }
-
-  bool ok = true;
-  if (received != sent) {
-    std::printf("FAIL: the back-end received %lld of %ld keyframes (the rest were lost before it counted them)\n",
-                received, sent);
-    ok = false;
-  }
-  if (received < 0 || in_graph < 0 || waiting < 0 || dropped < 0 || received != in_graph + waiting + dropped) {
-    std::printf("FAIL: received %lld != in graph %lld + waiting %lld + dropped %lld\n", received, in_graph, waiting,
-                dropped);
-    ok = false;
-  }
-  if (ok) std::printf("OK: every keyframe received and accounted for\n");
+  printRow(sending.sent, s);
+  printSummary(run, sending, s, arrived);
+  const bool ok = checkAccounting(sending.sent, s);
   std::fflush(stdout);
   spinner.stop();
   return ok ? 0 : mild::tools::kExitFailure;

@@ -352,6 +352,270 @@ Timing measure2017(const Workload& w, size_t n, const mild::DatabaseParams& et_p
   return timing;
 }
 
+std::unique_ptr<mild::FeatureExtractor> makeExtractor(const Options& opt) {
+  mild::FeatureParams feature_params;
+  feature_params.type = opt.feature_type;
+  // Every extractor's budget, whichever the type names.
+  mild::forEachSection(feature_params.extractors, [&](auto& section) { section.num_features = opt.features; });
+  return mild::makeFeatureExtractor(feature_params);
+}
+
+// The MIH columns are the index without the bound on bucket length or the query budget (early
+// termination at 20 of the first 64 bits as shipped); the bounded column adds both, and with the
+// shipped values it is the shipped configuration (config/default.yaml).
+mild::DatabaseParams unboundedParams(const mild::FeatureExtractor& extractor) {
+  mild::DatabaseParams et_params;
+  et_params.descriptor_bytes = extractor.descriptorBytes();
+  et_params.index.max_bucket_entries = 0;  // the index unbounded: every bucket whole, every entry read
+  et_params.index.max_candidates_per_feature = 0;
+  return et_params;
+}
+
+// The same index without early termination.
+mild::DatabaseParams withoutEarlyTermination(mild::DatabaseParams params) {
+  params.similarity.early_termination_threshold = 64;  // never rejects early
+  return params;
+}
+
+// mild_lcd needs ~100 bytes per feature (~230 with inline prefixes), the 2017 design ~170; one after the other.
+size_t bytesNeeded(const Options& opt, const Workload& w, size_t n) {
+  size_t features = n * static_cast<size_t>(opt.features);
+  if (w.walk) {
+    features = 0;
+    for (size_t k = 0; k < n; ++k) features += w.walk->keyframe(k).size();
+  }
+  return features * (opt.inline_prefixes ? 260 : 200);
+}
+
+void printTableHeader() {
+  std::printf("%9s %11s %11s %12s %12s %12s %10s %9s %9s %9s\n", "keyframes", "mih_ms", "mih_et_ms", "mih_et_p95",
+              "mild2017_ms", "brute_ms", "B/feature", "insert_ms", "x2017", "xbrute");
+}
+
+// Everything measured at one size.
+struct SizeRuns {
+  MihRun unbounded;
+  IndexRun inlined;
+  IndexRun bounded;
+  FaissRun faiss;
+  Timing baseline;
+};
+
+// Each baseline in turn, in this order (the machine's state moves with the run).
+SizeRuns measureSize(const Options& opt, const Workload& w, size_t n, const mild::DatabaseParams& et_params,
+                     const mild::DatabaseParams& full_params) {
+  SizeRuns runs;
+  runs.unbounded = measureMih(opt, w, n, et_params, full_params);
+  runs.inlined = opt.inline_prefixes ? measureIndex(w, n, inlinePrefixes(et_params)) : IndexRun{};
+  runs.bounded =
+      opt.bounded > 0 ? measureIndex(w, n, boundedBuckets(et_params, opt.bounded, opt.max_candidates)) : IndexRun{};
+  runs.faiss = n <= opt.faiss_max_keyframes ? measureFaiss(opt, w, n, et_params) : FaissRun{};
+  // The 2017 design is ORB's 16 tables of 16 bits.
+  const int bits = et_params.descriptor_bytes * 8;
+  runs.baseline = !opt.skip_baseline && bits == 256 ? measure2017(w, n, et_params) : Timing{};
+  return runs;
+}
+
+// The shipped configuration's figures: the bounded database when its bound is the shipped one.
+struct Shipped {
+  bool measured;
+  const Timing& timing;
+  const mild::QueryStats& work;
+  const InsertTiming& insert;
+  double bytes_per_feature;
+  const std::vector<uint64_t>& pairs;
+};
+
+Shipped shippedConfiguration(const Options& opt, const SizeRuns& runs) {
+  const uint32_t shipped_bound = mild::MihParams{}.max_bucket_entries;
+  const MihRun& unbounded = runs.unbounded;
+  const IndexRun& bounded = runs.bounded;
+  const bool measured = opt.max_candidates == mild::MihParams{}.max_candidates_per_feature &&
+                        (shipped_bound == 0 || (opt.bounded == shipped_bound && !bounded.timing.samples.empty()));
+  if (shipped_bound == 0) {
+    return {measured, unbounded.mih_et, unbounded.work, unbounded.insert, unbounded.bytes_per_feature, unbounded.pairs};
+  }
+  return {measured, bounded.timing, bounded.work, bounded.insert, bounded.bytes_per_feature, bounded.pairs};
+}
+
+// Share of the exact search's pairs within d0 that `found` has, over the queries the exact search
+// answered; nullopt without exact pairs to compare with.
+std::optional<double> pairRecall(const std::vector<uint64_t>& exact_pairs, const std::vector<uint64_t>& found) {
+  const size_t n_queries = exact_pairs.size();
+  if (n_queries == 0 || found.size() < n_queries) return std::nullopt;
+  const double truth = std::accumulate(exact_pairs.begin(), exact_pairs.end(), 0.0);
+  return truth > 0 ? std::optional<double>(std::accumulate(found.begin(), found.begin() + n_queries, 0.0) / truth)
+                   : std::nullopt;
+}
+
+// The figures a size may lack: nullopt where the baseline did not run.
+struct OptionalFigures {
+  std::optional<double> brute_ms, base_ms, faiss_mih_ms, faiss_exact_ms;
+  std::optional<double> recall_default, recall_unbounded, recall_faiss;
+};
+
+OptionalFigures optionalFigures(const SizeRuns& runs, const Shipped& shipped) {
+  const Timing& brute = runs.unbounded.brute;
+  const Timing& baseline = runs.baseline;
+  const Timing& faiss_mih = runs.faiss.mih;
+  const Timing& faiss_exact = runs.faiss.exact;
+  const std::vector<uint64_t>& exact_pairs = runs.faiss.exact_pairs;
+  OptionalFigures f;
+  f.brute_ms = brute.samples.empty() ? std::nullopt : std::optional<double>(brute.median());
+  f.base_ms = baseline.samples.empty() ? std::nullopt : std::optional<double>(baseline.median());
+  f.faiss_mih_ms = faiss_mih.samples.empty() ? std::nullopt : std::optional<double>(faiss_mih.median());
+  f.faiss_exact_ms = faiss_exact.samples.empty() ? std::nullopt : std::optional<double>(faiss_exact.median());
+  f.recall_default = pairRecall(exact_pairs, shipped.pairs);
+  f.recall_unbounded = pairRecall(exact_pairs, runs.unbounded.pairs);
+  f.recall_faiss = pairRecall(exact_pairs, runs.faiss.pairs);
+  return f;
+}
+
+json sizeRow(const Options& opt, size_t n, const SizeRuns& runs, const Shipped& shipped, const OptionalFigures& f) {
+  const Timing& mih = runs.unbounded.mih;
+  const Timing& mih_et = runs.unbounded.mih_et;
+  const mild::QueryStats& work = runs.unbounded.work;
+  const InsertTiming& insert = runs.unbounded.insert;
+  const Timing& inlined = runs.inlined.timing;
+  const Timing& bounded = runs.bounded.timing;
+  const FaissRun& faiss = runs.faiss;
+  json row = {{"keyframes", n}};
+  row["mih_ms_median"] = mih.median();
+  row["mih_ms_p95"] = mih.p95();
+  row["mih_et_ms_median"] = mih_et.median();
+  row["mih_et_ms_p95"] = mih_et.p95();
+  row["mih_bounded_ms_median"] = bounded.samples.empty() ? json(nullptr) : json(bounded.median());
+  row["mih_bounded_ms_p95"] = bounded.samples.empty() ? json(nullptr) : json(bounded.p95());
+  row["bound"] = opt.bounded;
+  row["query_budget"] = opt.max_candidates;
+  // The shipped configuration (config/default.yaml): early termination, buckets bounded at
+  // index/max_bucket_entries, prefixes not inlined.
+  row["default_ms_median"] = shipped.measured ? json(shipped.timing.median()) : json(nullptr);
+  row["default_ms_p95"] = shipped.measured ? json(shipped.timing.p95()) : json(nullptr);
+  row["default_bytes_per_feature"] = shipped.measured ? json(shipped.bytes_per_feature) : json(nullptr);
+  row["default_insert_ms_last_tenth"] = shipped.measured ? json(shipped.insert.last_tenth_ms) : json(nullptr);
+  row["default_insert_ms_max"] = shipped.measured ? json(shipped.insert.max_ms) : json(nullptr);
+  row["default_insert_ms_p99"] = shipped.measured ? json(shipped.insert.p99_ms) : json(nullptr);
+  row["default_inserts_over_2ms"] = shipped.measured ? json(shipped.insert.over_2ms) : json(nullptr);
+  row["default_candidates_per_query_feature"] =
+      shipped.measured ? json(static_cast<double>(shipped.work.candidates_visited) / shipped.work.query_features)
+                       : json(nullptr);
+  row["mih_inline_ms_median"] = inlined.samples.empty() ? json(nullptr) : json(inlined.median());
+  row["mih_inline_ms_p95"] = inlined.samples.empty() ? json(nullptr) : json(inlined.p95());
+  row["inline_bytes_per_feature"] = inlined.samples.empty() ? json(nullptr) : json(runs.inlined.bytes_per_feature);
+  row["inline_insert_ms"] = inlined.samples.empty() ? json(nullptr) : json(runs.inlined.insert.mean_ms);
+  row["baseline_2017_ms_median"] = nullable(f.base_ms);
+  row["baseline_2017_ms_p95"] = f.base_ms ? json(runs.baseline.p95()) : json(nullptr);
+  row["brute_ms_median"] = nullable(f.brute_ms);
+  row["faiss_mih_ms_median"] = nullable(f.faiss_mih_ms);
+  row["faiss_multihash_ms_median"] = nullable(f.faiss_mih_ms);  // the name issue 16 asks for
+  row["faiss_mih_ms_p95"] = f.faiss_mih_ms ? json(faiss.mih.p95()) : json(nullptr);
+  row["faiss_exact_ms_median"] = nullable(f.faiss_exact_ms);
+  row["faiss_mih_pairs_first_query"] = f.faiss_mih_ms ? json(faiss.mih_pairs_first) : json(nullptr);
+  row["faiss_exact_pairs_first_query"] = f.faiss_exact_ms ? json(faiss.exact_pairs_first) : json(nullptr);
+  row["faiss_mih_bytes_per_feature"] = f.faiss_mih_ms ? json(faiss.bytes_per_feature) : json(nullptr);
+  row["speedup_vs_faiss_mih"] = f.faiss_mih_ms ? json(*f.faiss_mih_ms / mih_et.median()) : json(nullptr);
+  row["speedup_vs_faiss_exact"] = f.faiss_exact_ms ? json(*f.faiss_exact_ms / mih_et.median()) : json(nullptr);
+  row["pair_recall_queries"] = faiss.exact_pairs.size();
+  row["pair_recall_default"] = shipped.measured ? nullable(f.recall_default) : json(nullptr);
+  row["pair_recall_unbounded"] = nullable(f.recall_unbounded);
+  row["pair_recall_faiss_multihash"] = nullable(f.recall_faiss);
+  row["bytes_per_feature"] = runs.unbounded.bytes_per_feature;
+  row["candidates_per_query_feature"] = static_cast<double>(work.candidates_visited) / work.query_features;
+  row["full_distances_per_query_feature"] = static_cast<double>(work.full_distances) / work.query_features;
+  row["votes_per_query_feature"] = static_cast<double>(work.votes) / work.query_features;
+  row["insert_ms_per_keyframe"] = insert.mean_ms;
+  row["insert_ms_last_tenth"] = insert.last_tenth_ms;
+  row["insert_ms_max"] = insert.max_ms;
+  row["insert_ms_p99"] = insert.p99_ms;
+  row["inserts_over_2ms"] = insert.over_2ms;
+  row["speedup_vs_2017"] = f.base_ms ? json(*f.base_ms / mih_et.median()) : json(nullptr);
+  row["speedup_vs_brute"] = f.brute_ms ? json(*f.brute_ms / mih_et.median()) : json(nullptr);
+  return row;
+}
+
+std::string cell(std::optional<double> v, const char* fmt) {
+  char buf[32];
+  if (!v) return std::string("-");
+  std::snprintf(buf, sizeof(buf), fmt, *v);
+  return std::string(buf);
+}
+
+void printSizeRow(const Options& opt, size_t n, const SizeRuns& runs, const Shipped& shipped, const OptionalFigures& f,
+                  const json& row) {
+  const Timing& mih_et = runs.unbounded.mih_et;
+  const InsertTiming& insert = runs.unbounded.insert;
+  const IndexRun& inline_run = runs.inlined;
+  const IndexRun& bounded_run = runs.bounded;
+  std::printf("%9zu %11.2f %11.2f %12.2f %12s %12s %10.1f %9.2f %9s %9s\n", n, runs.unbounded.mih.median(),
+              mih_et.median(), mih_et.p95(), cell(f.base_ms, "%.2f").c_str(), cell(f.brute_ms, "%.1f").c_str(),
+              runs.unbounded.bytes_per_feature, insert.mean_ms,
+              cell(f.base_ms ? std::optional<double>(*f.base_ms / mih_et.median()) : std::nullopt, "%.1fx").c_str(),
+              cell(f.brute_ms ? std::optional<double>(*f.brute_ms / mih_et.median()) : std::nullopt, "%.0fx").c_str());
+  if (f.faiss_mih_ms) {
+    std::printf(
+        "%9s faiss IndexBinaryMultiHash: %.2f ms (p95 %.2f; %.1fx mild_lcd's time), ~%.0f B/feature;"
+        " IndexBinaryFlat: %s ms\n",
+        "", *f.faiss_mih_ms, runs.faiss.mih.p95(), *f.faiss_mih_ms / mih_et.median(), runs.faiss.bytes_per_feature,
+        cell(f.faiss_exact_ms, "%.1f").c_str());
+  }
+  if (f.recall_unbounded) {
+    std::printf(
+        "%9s pairs within d0 found, of the exact search's (%zu queries): default %s, unbounded %s, faiss "
+        "MultiHash %s\n",
+        "", runs.faiss.exact_pairs.size(), cell(shipped.measured ? f.recall_default : std::nullopt, "%.3f").c_str(),
+        cell(f.recall_unbounded, "%.3f").c_str(), cell(f.recall_faiss, "%.3f").c_str());
+  }
+  if (!inline_run.timing.samples.empty()) {
+    std::printf("%9s inline prefixes: %.2f ms (p95 %.2f), %.0f B/feature, insert %.2f ms\n", "",
+                inline_run.timing.median(), inline_run.timing.p95(), inline_run.bytes_per_feature,
+                inline_run.insert.mean_ms);
+  }
+  std::printf("%9s insert: %.2f ms mean, %.2f ms over the last tenth, %.1f ms the slowest (p99 %.2f, %zu over 2 ms)\n",
+              "", insert.mean_ms, insert.last_tenth_ms, insert.max_ms, insert.p99_ms, insert.over_2ms);
+  if (!bounded_run.timing.samples.empty()) {
+    std::printf(
+        "%9s bounded buckets (%u entries, query budget %u%s): %.2f ms (p95 %.2f), %.0f candidates per query "
+        "feature, %.1f B/feature, insert %.2f ms over the last tenth, %.1f ms the slowest (p99 %.2f, %zu over 2 "
+        "ms)\n",
+        "", opt.bounded, opt.max_candidates, shipped.measured ? ", the shipped configuration" : "",
+        bounded_run.timing.median(), bounded_run.timing.p95(),
+        static_cast<double>(bounded_run.work.candidates_visited) / bounded_run.work.query_features,
+        bounded_run.bytes_per_feature, bounded_run.insert.last_tenth_ms, bounded_run.insert.max_ms,
+        bounded_run.insert.p99_ms, bounded_run.insert.over_2ms);
+  }
+  std::printf("%9s per query feature: %.0f candidates, %.0f full distances, %.1f votes\n", "",
+              row["candidates_per_query_feature"].get<double>(), row["full_distances_per_query_feature"].get<double>(),
+              row["votes_per_query_feature"].get<double>());
+  std::fflush(stdout);
+}
+
+// Growth: t(10k) / t(1k) when both were measured.
+void addGrowth(const Options& opt, const json& rows, json& out) {
+  double t1k = 0, t10k = 0;
+  for (const auto& r : rows) {
+    if (!r.contains("mih_et_ms_median")) continue;
+    if (r["keyframes"] == 1000) t1k = r["mih_et_ms_median"];
+    if (r["keyframes"] == 10000) t10k = r["mih_et_ms_median"];
+  }
+  if (t1k > 0 && t10k > 0) {
+    out["growth_10k_over_1k"] = t10k / t1k;
+    if (!opt.json) std::printf("t(10k) / t(1k) = %.2f\n", t10k / t1k);
+  }
+}
+
+void addPersistence(const Options& opt, const Workload& w, json& out) {
+  if (opt.persistence_keyframes > 0 && (!w.walk || opt.persistence_keyframes <= w.walk->size())) {
+    out["persistence"] = measurePersistence(w.keyframe_at, opt.persistence_keyframes);
+    if (!opt.json) {
+      const json& p = out["persistence"];
+      std::printf("database file, %zu keyframes, %zu features: %.0f MB, save %.2f s, load %.2f s (index rebuilt)\n",
+                  opt.persistence_keyframes, p["features"].get<size_t>(), p["file_mb"].get<double>(),
+                  p["save_s"].get<double>(), p["load_s"].get<double>());
+    }
+  }
+}
+
 int run(const Options& opt) {
 #if !MILD_HAVE_FAISS
   // faiss (Debian's libfaiss-dev, with OpenMP) is this benchmark's only use of it, and optional.
@@ -363,44 +627,18 @@ int run(const Options& opt) {
   cv::setNumThreads(1);
   const std::vector<std::string> dirs = opt.images.empty() ? defaultImageDirs() : opt.images;
 
-  mild::FeatureParams feature_params;
-  feature_params.type = opt.feature_type;
-  // Every extractor's budget, whichever the type names.
-  mild::forEachSection(feature_params.extractors, [&](auto& section) { section.num_features = opt.features; });
-  const std::unique_ptr<mild::FeatureExtractor> extractor_owner = mild::makeFeatureExtractor(feature_params);
+  const std::unique_ptr<mild::FeatureExtractor> extractor_owner = makeExtractor(opt);
   const mild::FeatureExtractor& extractor = *extractor_owner;
   Workload workload;
   loadWorkload(opt, dirs, extractor, workload);
-  const std::optional<mild::tools::SequenceKeyframes>& walk = workload.walk;
-  const std::vector<mild::DescriptorList>& queries = workload.queries;
-  const KeyframeAt& keyframe_at = workload.keyframe_at;
-  const std::vector<size_t>& sizes = workload.sizes;
 
-  // The MIH columns are the index without the bound on bucket length or the query budget (early
-  // termination at 20 of the first 64 bits as shipped); the bounded column adds both, and with the
-  // shipped values it is the shipped configuration (config/default.yaml).
-  mild::DatabaseParams et_params;
-  et_params.descriptor_bytes = extractor.descriptorBytes();
-  et_params.index.max_bucket_entries = 0;  // the index unbounded: every bucket whole, every entry read
-  et_params.index.max_candidates_per_feature = 0;
-  const uint32_t shipped_bound = mild::MihParams{}.max_bucket_entries;
-  const int bits = et_params.descriptor_bytes * 8;
-  mild::DatabaseParams full_params = et_params;
-  full_params.similarity.early_termination_threshold = 64;  // never rejects early
+  const mild::DatabaseParams et_params = unboundedParams(extractor);
+  const mild::DatabaseParams full_params = withoutEarlyTermination(et_params);
 
   json rows = json::array();
-  if (!opt.json) {
-    std::printf("%9s %11s %11s %12s %12s %12s %10s %9s %9s %9s\n", "keyframes", "mih_ms", "mih_et_ms", "mih_et_p95",
-                "mild2017_ms", "brute_ms", "B/feature", "insert_ms", "x2017", "xbrute");
-  }
-  for (size_t n : sizes) {
-    size_t features = n * static_cast<size_t>(opt.features);
-    if (walk) {
-      features = 0;
-      for (size_t k = 0; k < n; ++k) features += walk->keyframe(k).size();
-    }
-    // mild_lcd needs ~100 bytes per feature (~230 with inline prefixes), the 2017 design ~170; one after the other.
-    const size_t bytes_needed = features * (opt.inline_prefixes ? 260 : 200);
+  if (!opt.json) printTableHeader();
+  for (size_t n : workload.sizes) {
+    const size_t bytes_needed = bytesNeeded(opt, workload, n);
     if (bytes_needed > availableMemoryBytes()) {
       if (!opt.json)
         std::printf("%9zu skipped: needs about %.1f GB, %.1f GB available\n", n, bytes_needed / 1e9,
@@ -408,187 +646,20 @@ int run(const Options& opt) {
       rows.push_back({{"keyframes", n}, {"skipped", "memory"}});
       continue;
     }
-    json row = {{"keyframes", n}};
-    // Each baseline in turn, in this order (the machine's state moves with the run).
-    const MihRun unbounded = measureMih(opt, workload, n, et_params, full_params);
-    const Timing& mih = unbounded.mih;
-    const Timing& mih_et = unbounded.mih_et;
-    const Timing& brute = unbounded.brute;
-    const mild::QueryStats& work = unbounded.work;
-    const InsertTiming& insert = unbounded.insert;
-    const double bytes_per_feature = unbounded.bytes_per_feature;
-    const std::vector<uint64_t>& unbounded_pairs = unbounded.pairs;
-    const IndexRun inline_run = opt.inline_prefixes ? measureIndex(workload, n, inlinePrefixes(et_params)) : IndexRun{};
-    const Timing& inlined = inline_run.timing;
-    const double inline_insert_ms = inline_run.insert.mean_ms, inline_bytes_per_feature = inline_run.bytes_per_feature;
-    const IndexRun bounded_run =
-        opt.bounded > 0 ? measureIndex(workload, n, boundedBuckets(et_params, opt.bounded, opt.max_candidates))
-                        : IndexRun{};
-    const Timing& bounded = bounded_run.timing;
-    const mild::QueryStats& bounded_work = bounded_run.work;
-    const InsertTiming& bounded_insert = bounded_run.insert;
-    const double bounded_bytes_per_feature = bounded_run.bytes_per_feature;
-    const std::vector<uint64_t>& bounded_pairs = bounded_run.pairs;
-    // The shipped configuration's figures: the bounded database when its bound is the shipped one.
-    const bool shipped_measured = opt.max_candidates == mild::MihParams{}.max_candidates_per_feature &&
-                                  (shipped_bound == 0 || (opt.bounded == shipped_bound && !bounded.samples.empty()));
-    const Timing& shipped = shipped_bound == 0 ? mih_et : bounded;
-    const mild::QueryStats& shipped_work = shipped_bound == 0 ? work : bounded_work;
-    const InsertTiming& shipped_insert = shipped_bound == 0 ? insert : bounded_insert;
-    const double shipped_bytes = shipped_bound == 0 ? bytes_per_feature : bounded_bytes_per_feature;
-    const FaissRun faiss = n <= opt.faiss_max_keyframes ? measureFaiss(opt, workload, n, et_params) : FaissRun{};
-    const Timing& faiss_mih = faiss.mih;
-    const Timing& faiss_exact = faiss.exact;
-    const double faiss_bytes_per_feature = faiss.bytes_per_feature;
-    const size_t faiss_mih_pairs = faiss.mih_pairs_first, faiss_exact_pairs = faiss.exact_pairs_first;
-    const std::vector<uint64_t>& faiss_pairs = faiss.pairs;
-    const std::vector<uint64_t>& exact_pairs = faiss.exact_pairs;
-    // The 2017 design is ORB's 16 tables of 16 bits.
-    const Timing baseline = !opt.skip_baseline && bits == 256 ? measure2017(workload, n, et_params) : Timing{};
-    const std::optional<double> brute_ms = brute.samples.empty() ? std::nullopt : std::optional<double>(brute.median());
-    const std::optional<double> base_ms =
-        baseline.samples.empty() ? std::nullopt : std::optional<double>(baseline.median());
-    row["mih_ms_median"] = mih.median();
-    row["mih_ms_p95"] = mih.p95();
-    row["mih_et_ms_median"] = mih_et.median();
-    row["mih_et_ms_p95"] = mih_et.p95();
-    row["mih_bounded_ms_median"] = bounded.samples.empty() ? json(nullptr) : json(bounded.median());
-    row["mih_bounded_ms_p95"] = bounded.samples.empty() ? json(nullptr) : json(bounded.p95());
-    row["bound"] = opt.bounded;
-    row["query_budget"] = opt.max_candidates;
-    // The shipped configuration (config/default.yaml): early termination, buckets bounded at
-    // index/max_bucket_entries, prefixes not inlined.
-    row["default_ms_median"] = shipped_measured ? json(shipped.median()) : json(nullptr);
-    row["default_ms_p95"] = shipped_measured ? json(shipped.p95()) : json(nullptr);
-    row["default_bytes_per_feature"] = shipped_measured ? json(shipped_bytes) : json(nullptr);
-    row["default_insert_ms_last_tenth"] = shipped_measured ? json(shipped_insert.last_tenth_ms) : json(nullptr);
-    row["default_insert_ms_max"] = shipped_measured ? json(shipped_insert.max_ms) : json(nullptr);
-    row["default_insert_ms_p99"] = shipped_measured ? json(shipped_insert.p99_ms) : json(nullptr);
-    row["default_inserts_over_2ms"] = shipped_measured ? json(shipped_insert.over_2ms) : json(nullptr);
-    row["default_candidates_per_query_feature"] =
-        shipped_measured ? json(static_cast<double>(shipped_work.candidates_visited) / shipped_work.query_features)
-                         : json(nullptr);
-    row["mih_inline_ms_median"] = inlined.samples.empty() ? json(nullptr) : json(inlined.median());
-    row["mih_inline_ms_p95"] = inlined.samples.empty() ? json(nullptr) : json(inlined.p95());
-    row["inline_bytes_per_feature"] = inlined.samples.empty() ? json(nullptr) : json(inline_bytes_per_feature);
-    row["inline_insert_ms"] = inlined.samples.empty() ? json(nullptr) : json(inline_insert_ms);
-    row["baseline_2017_ms_median"] = nullable(base_ms);
-    row["baseline_2017_ms_p95"] = base_ms ? json(baseline.p95()) : json(nullptr);
-    row["brute_ms_median"] = nullable(brute_ms);
-    const std::optional<double> faiss_mih_ms =
-        faiss_mih.samples.empty() ? std::nullopt : std::optional<double>(faiss_mih.median());
-    const std::optional<double> faiss_exact_ms =
-        faiss_exact.samples.empty() ? std::nullopt : std::optional<double>(faiss_exact.median());
-    row["faiss_mih_ms_median"] = nullable(faiss_mih_ms);
-    row["faiss_multihash_ms_median"] = nullable(faiss_mih_ms);  // the name issue 16 asks for
-    row["faiss_mih_ms_p95"] = faiss_mih_ms ? json(faiss_mih.p95()) : json(nullptr);
-    row["faiss_exact_ms_median"] = nullable(faiss_exact_ms);
-    row["faiss_mih_pairs_first_query"] = faiss_mih_ms ? json(faiss_mih_pairs) : json(nullptr);
-    row["faiss_exact_pairs_first_query"] = faiss_exact_ms ? json(faiss_exact_pairs) : json(nullptr);
-    row["faiss_mih_bytes_per_feature"] = faiss_mih_ms ? json(faiss_bytes_per_feature) : json(nullptr);
-    row["speedup_vs_faiss_mih"] = faiss_mih_ms ? json(*faiss_mih_ms / mih_et.median()) : json(nullptr);
-    row["speedup_vs_faiss_exact"] = faiss_exact_ms ? json(*faiss_exact_ms / mih_et.median()) : json(nullptr);
-    const auto pair_recall = [&exact_pairs](const std::vector<uint64_t>& found) -> std::optional<double> {
-      const size_t n_queries = exact_pairs.size();
-      if (n_queries == 0 || found.size() < n_queries) return std::nullopt;
-      const double truth = std::accumulate(exact_pairs.begin(), exact_pairs.end(), 0.0);
-      return truth > 0 ? std::optional<double>(std::accumulate(found.begin(), found.begin() + n_queries, 0.0) / truth)
-                       : std::nullopt;
-    };
-    const std::optional<double> recall_default = pair_recall(shipped_bound == 0 ? unbounded_pairs : bounded_pairs);
-    const std::optional<double> recall_unbounded = pair_recall(unbounded_pairs);
-    const std::optional<double> recall_faiss = pair_recall(faiss_pairs);
-    row["pair_recall_queries"] = exact_pairs.size();
-    row["pair_recall_default"] = shipped_measured ? nullable(recall_default) : json(nullptr);
-    row["pair_recall_unbounded"] = nullable(recall_unbounded);
-    row["pair_recall_faiss_multihash"] = nullable(recall_faiss);
-    row["bytes_per_feature"] = bytes_per_feature;
-    row["candidates_per_query_feature"] = static_cast<double>(work.candidates_visited) / work.query_features;
-    row["full_distances_per_query_feature"] = static_cast<double>(work.full_distances) / work.query_features;
-    row["votes_per_query_feature"] = static_cast<double>(work.votes) / work.query_features;
-    row["insert_ms_per_keyframe"] = insert.mean_ms;
-    row["insert_ms_last_tenth"] = insert.last_tenth_ms;
-    row["insert_ms_max"] = insert.max_ms;
-    row["insert_ms_p99"] = insert.p99_ms;
-    row["inserts_over_2ms"] = insert.over_2ms;
-    row["speedup_vs_2017"] = base_ms ? json(*base_ms / mih_et.median()) : json(nullptr);
-    row["speedup_vs_brute"] = brute_ms ? json(*brute_ms / mih_et.median()) : json(nullptr);
+    const SizeRuns runs = measureSize(opt, workload, n, et_params, full_params);
+    const Shipped shipped = shippedConfiguration(opt, runs);
+    const OptionalFigures figures = optionalFigures(runs, shipped);
+    const json row = sizeRow(opt, n, runs, shipped, figures);
     rows.push_back(row);
-    if (!opt.json) {
-      auto cell = [](std::optional<double> v, const char* fmt) {
-        char buf[32];
-        if (!v) return std::string("-");
-        std::snprintf(buf, sizeof(buf), fmt, *v);
-        return std::string(buf);
-      };
-      std::printf("%9zu %11.2f %11.2f %12.2f %12s %12s %10.1f %9.2f %9s %9s\n", n, mih.median(), mih_et.median(),
-                  mih_et.p95(), cell(base_ms, "%.2f").c_str(), cell(brute_ms, "%.1f").c_str(), bytes_per_feature,
-                  insert.mean_ms,
-                  cell(base_ms ? std::optional<double>(*base_ms / mih_et.median()) : std::nullopt, "%.1fx").c_str(),
-                  cell(brute_ms ? std::optional<double>(*brute_ms / mih_et.median()) : std::nullopt, "%.0fx").c_str());
-      if (faiss_mih_ms) {
-        std::printf(
-            "%9s faiss IndexBinaryMultiHash: %.2f ms (p95 %.2f; %.1fx mild_lcd's time), ~%.0f B/feature;"
-            " IndexBinaryFlat: %s ms\n",
-            "", *faiss_mih_ms, faiss_mih.p95(), *faiss_mih_ms / mih_et.median(), faiss_bytes_per_feature,
-            cell(faiss_exact_ms, "%.1f").c_str());
-      }
-      if (recall_unbounded) {
-        std::printf(
-            "%9s pairs within d0 found, of the exact search's (%zu queries): default %s, unbounded %s, faiss "
-            "MultiHash %s\n",
-            "", exact_pairs.size(), cell(shipped_measured ? recall_default : std::nullopt, "%.3f").c_str(),
-            cell(recall_unbounded, "%.3f").c_str(), cell(recall_faiss, "%.3f").c_str());
-      }
-      if (!inlined.samples.empty()) {
-        std::printf("%9s inline prefixes: %.2f ms (p95 %.2f), %.0f B/feature, insert %.2f ms\n", "", inlined.median(),
-                    inlined.p95(), inline_bytes_per_feature, inline_insert_ms);
-      }
-      std::printf(
-          "%9s insert: %.2f ms mean, %.2f ms over the last tenth, %.1f ms the slowest (p99 %.2f, %zu over 2 ms)\n", "",
-          insert.mean_ms, insert.last_tenth_ms, insert.max_ms, insert.p99_ms, insert.over_2ms);
-      if (!bounded.samples.empty()) {
-        std::printf(
-            "%9s bounded buckets (%u entries, query budget %u%s): %.2f ms (p95 %.2f), %.0f candidates per query "
-            "feature, %.1f B/feature, insert %.2f ms over the last tenth, %.1f ms the slowest (p99 %.2f, %zu over 2 "
-            "ms)\n",
-            "", opt.bounded, opt.max_candidates, shipped_measured ? ", the shipped configuration" : "",
-            bounded.median(), bounded.p95(),
-            static_cast<double>(bounded_work.candidates_visited) / bounded_work.query_features,
-            bounded_bytes_per_feature, bounded_insert.last_tenth_ms, bounded_insert.max_ms, bounded_insert.p99_ms,
-            bounded_insert.over_2ms);
-      }
-      std::printf("%9s per query feature: %.0f candidates, %.0f full distances, %.1f votes\n", "",
-                  row["candidates_per_query_feature"].get<double>(),
-                  row["full_distances_per_query_feature"].get<double>(), row["votes_per_query_feature"].get<double>());
-      std::fflush(stdout);
-    }
+    if (!opt.json) printSizeRow(opt, n, runs, shipped, figures, row);
   }
-  // Growth: t(10k) / t(1k) when both were measured.
   json out = {{"faiss", MILD_HAVE_FAISS != 0},
               {"rows", rows},
               {"features_per_keyframe", opt.features},
-              {"queries", queries.size()},
-              {"keyframes_from", walk ? "sequence" : "replicated frames"}};
-  if (opt.persistence_keyframes > 0 && (!walk || opt.persistence_keyframes <= walk->size())) {
-    out["persistence"] = measurePersistence(keyframe_at, opt.persistence_keyframes);
-    if (!opt.json) {
-      const json& p = out["persistence"];
-      std::printf("database file, %zu keyframes, %zu features: %.0f MB, save %.2f s, load %.2f s (index rebuilt)\n",
-                  opt.persistence_keyframes, p["features"].get<size_t>(), p["file_mb"].get<double>(),
-                  p["save_s"].get<double>(), p["load_s"].get<double>());
-    }
-  }
-  double t1k = 0, t10k = 0;
-  for (const auto& r : rows) {
-    if (!r.contains("mih_et_ms_median")) continue;
-    if (r["keyframes"] == 1000) t1k = r["mih_et_ms_median"];
-    if (r["keyframes"] == 10000) t10k = r["mih_et_ms_median"];
-  }
-  if (t1k > 0 && t10k > 0) {
-    out["growth_10k_over_1k"] = t10k / t1k;
-    if (!opt.json) std::printf("t(10k) / t(1k) = %.2f\n", t10k / t1k);
-  }
+              {"queries", workload.queries.size()},
+              {"keyframes_from", workload.walk ? "sequence" : "replicated frames"}};
+  addPersistence(opt, workload, out);
+  addGrowth(opt, rows, out);
   if (opt.json) std::cout << out.dump() << "\n";
   return 0;
 }

@@ -67,6 +67,207 @@ json timingJson(const std::vector<double>& samples) {
   return {{"mean", s.mean}, {"median", s.median}, {"p95", s.p95}, {"p99", s.p99}, {"max", s.max}};
 }
 
+struct EstimatedPose {
+  size_t query;
+  uint64_t candidate;
+  mild::RelativePose pose;
+};
+
+// Per-stage times of every keyframe, in order.
+struct StageTimes {
+  std::vector<double> extract_ms, query_ms, filter_ms, verify_ms, keyframe_ms, keyframe_cpu_ms;
+};
+
+// What the pass over the frames gathers, besides the CSV files it writes as it goes.
+struct DetectionPass {
+  StageTimes times;
+  std::vector<float> similarity_matrix;
+  std::vector<EstimatedPose> estimated;
+  size_t skipped = 0, features = 0;
+};
+
+std::ofstream openCandidatesCsv(const Options& opt) {
+  std::ofstream csv(opt.output);
+  if (!csv) throw mild::InvalidInput(opt.output + ": cannot write the candidates file");
+  csv << "query,candidate,score\n";
+  return csv;
+}
+
+// Not opened without --details.
+std::ofstream openDetailsCsv(const Options& opt) {
+  std::ofstream details;
+  if (!opt.details.empty()) {
+    details.open(opt.details);
+    if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
+    details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
+               "homography_share,verified,accepted,near_past,fit_skipped,eligible,saliency,reported";
+    // The scorer's feature vector, as it computes it: scripts/fit_scoring.py fits on these columns.
+    for (const std::string& name : mild::CandidateScorer::featureNames()) details << "," << name;
+    details << "\n";
+  }
+  return details;
+}
+
+// The whole pipeline per keyframe (keyframe_ms) is the four stages' sum.
+void recordStageTimes(const mild::StepStats& stats, StageTimes& times) {
+  times.extract_ms.push_back(stats.extract_ms);
+  times.query_ms.push_back(stats.query_ms);
+  times.filter_ms.push_back(stats.filter_ms);
+  times.verify_ms.push_back(stats.verify_ms);
+  times.keyframe_ms.push_back(stats.extract_ms + stats.query_ms + stats.filter_ms + stats.verify_ms);
+}
+
+void writeDetailsRow(std::ostream& details, size_t query, const mild::DetectionResult& r, const mild::LoopCandidate& c,
+                     bool reported, const mild::LoopDetector& detector) {
+  const mild::Verification& v = c.verification;
+  details << query << "," << c.id << "," << mild::formatScore(c.probability) << ","
+          << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
+          << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
+          << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "," << (v.fit_skipped ? 1 : 0) << ","
+          << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0);
+  for (double x : detector.scorer().features(mild::LoopDetector::evidenceOf(c), v)) details << "," << x;
+  details << "\n";
+}
+
+void writeCandidates(const Options& opt, size_t i, const mild::DetectionResult& r, const mild::LoopDetector& detector,
+                     std::ofstream& csv, std::ofstream& details, std::vector<EstimatedPose>& estimated) {
+  for (const mild::LoopCandidate& c : r.candidates) {
+    // Every candidate with its published probability: one that failed verification keeps a
+    // (low) probability, which ranks it below the verified ones.
+    csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
+    if (c.verification.pose.valid) estimated.push_back({i, c.id, c.verification.pose});
+    if (details.is_open()) writeDetailsRow(details, i, r, c, true, detector);
+  }
+  // Training data: the candidates judged but not reported (beyond detector/max_candidates) too.
+  if (details.is_open() && opt.fit_every_candidate) {
+    for (const mild::LoopCandidate& c : r.unreported) writeDetailsRow(details, i, r, c, false, detector);
+  }
+}
+
+// Row = query frame, column = candidate frame (ids are frame indices).
+void recordSimilarityRow(size_t i, size_t n, const mild::DetectionResult& r, const mild::LoopDetector& detector,
+                         std::vector<float>& similarity_matrix) {
+  for (size_t k = 0; k < r.similarity.size(); ++k) {
+    similarity_matrix[i * n + detector.record(static_cast<mild::KeyframeIndex>(k)).id] =
+        static_cast<float>(r.similarity[k]);
+  }
+}
+
+DetectionPass detectOverSequence(const Options& opt, const mild::tools::ImageSequence& seq,
+                                 mild::LoopDetector& detector, std::ofstream& csv, std::ofstream& details) {
+  const size_t n = seq.frames.size();
+  DetectionPass pass;
+  if (!opt.similarity.empty()) pass.similarity_matrix.assign(n * n, 0.0f);
+  mild::tools::ProgressBar progress(n, "mild_offline");
+  for (size_t i = 0; i < n; ++i) {
+    progress.update(i);
+    auto frame = readFrame(seq.frames[i], opt.scale);
+    if (!frame) {
+      ++pass.skipped;
+      std::cerr << "\nwarning: frame " << i << " (" << seq.frames[i] << ") cannot be read as an image; skipped\n";
+      continue;
+    }
+    const double cpu_start = mild::threadCpuMs();
+    const mild::DetectionResult r = detector.process(frame->first, frame->second, seq.stamps[i], i);
+    pass.times.keyframe_cpu_ms.push_back(mild::threadCpuMs() - cpu_start);
+    recordStageTimes(r.stats, pass.times);
+    pass.features += r.stats.features;
+    writeCandidates(opt, i, r, detector, csv, details, pass.estimated);
+    if (!pass.similarity_matrix.empty()) recordSimilarityRow(i, n, r, detector, pass.similarity_matrix);
+  }
+  progress.finish();
+  return pass;
+}
+
+// Relative poses of the verified candidates that are true loops (all of them without --gt).
+json reportRelativePoses(const std::vector<EstimatedPose>& estimated, const std::vector<mild::PlanarPose>& poses,
+                         const std::optional<mild::GroundTruth>& truth) {
+  mild::PoseErrors errors;
+  for (const EstimatedPose& e : estimated) {
+    if (e.candidate >= poses.size()) continue;
+    if (truth && !truth->right.count({static_cast<int>(e.query), static_cast<int>(e.candidate)})) continue;
+    errors.add(e.pose, poses[e.query], poses[e.candidate]);
+  }
+  const auto rot = mild::tools::summarize(errors.rotation_deg);
+  const auto dir = mild::tools::summarize(errors.translation_deg);
+  const json pose_summary = {{"poses", errors.rotation_deg.size()},
+                             {"rotation_error_deg", {{"median", rot.median}, {"p95", rot.p95}}},
+                             {"translation_direction_pairs", errors.translation_deg.size()},
+                             {"translation_direction_error_deg", {{"median", dir.median}, {"p95", dir.p95}}}};
+  if (errors.rotation_deg.empty()) {
+    std::printf("relative pose: none estimated (verification needs the intrinsics verification/fx, fy, cx, cy)\n");
+  } else {
+    std::printf(
+        "relative pose of %zu verified %s: rotation error median %.2f deg (p95 %.2f); baseline direction error"
+        " median %.1f deg (p95 %.1f) over the %zu pairs >= %.1f m apart\n",
+        errors.rotation_deg.size(), truth ? "true loops" : "candidates", rot.median, rot.p95, dir.median, dir.p95,
+        errors.translation_deg.size(), errors.min_baseline_m);
+  }
+  return pose_summary;
+}
+
+// Medians per window of keyframes, in order: what each stage costs as the map grows.
+json windowMedians(const StageTimes& times, size_t w) {
+  json windows = json::array();
+  for (size_t begin = 0; begin < times.keyframe_ms.size(); begin += w) {
+    const size_t end = std::min(times.keyframe_ms.size(), begin + w);
+    const auto slice = [&](const std::vector<double>& v) {
+      return mild::tools::summarize(
+          std::vector<double>(v.begin() + static_cast<long>(begin), v.begin() + static_cast<long>(end)));
+    };
+    windows.push_back({{"first", begin},
+                       {"last", end - 1},
+                       {"extract_ms", slice(times.extract_ms).median},
+                       {"query_ms", slice(times.query_ms).median},
+                       {"filter_ms", slice(times.filter_ms).median},
+                       {"verify_ms", slice(times.verify_ms).median},
+                       {"keyframe_ms", slice(times.keyframe_ms).median},
+                       {"keyframe_cpu_ms", slice(times.keyframe_cpu_ms).median},
+                       {"keyframe_cpu_ms_p99", slice(times.keyframe_cpu_ms).p99}});
+  }
+  return windows;
+}
+
+void writeStats(const Options& opt, const DetectionPass& pass, const mild::LoopDetector& detector, size_t n,
+                const json& pose_summary) {
+  const StageTimes& times = pass.times;
+  json stats = {{"extract_ms", timingJson(times.extract_ms)},
+                {"query_ms", timingJson(times.query_ms)},
+                {"filter_ms", timingJson(times.filter_ms)},
+                // The whole pipeline per keyframe: the four stages' sum (their own medians do not add up).
+                {"keyframe_ms", timingJson(times.keyframe_ms)},
+                // The same in this thread's CPU time: robust to other processes on the cores.
+                {"keyframe_cpu_ms", timingJson(times.keyframe_cpu_ms)},
+                {"keyframes", detector.size()},
+                {"features", detector.database().featureCount()},
+                {"memory_bytes", detector.memoryBytes()},
+                {"index_memory_bytes", detector.database().index().memoryBytes()},
+                {"discarded_buckets", detector.database().index().discardedBuckets()},
+                {"frames", n},
+                {"skipped_frames", pass.skipped}};
+  if (detector.verifies()) stats["verify_ms"] = timingJson(times.verify_ms);
+  stats["windows"] = windowMedians(times, static_cast<size_t>(opt.stats_window));
+  if (!pose_summary.is_null()) stats["relative_pose"] = pose_summary;
+  std::ofstream out(opt.stats);
+  out << stats.dump(2) << "\n";
+  if (!out) throw mild::InvalidInput(opt.stats + ": cannot write the stats file");
+}
+
+// Score what was written, exactly as the referee reads it.
+void scoreCandidates(const Options& opt, const mild::GroundTruth& truth, size_t n) {
+  const mild::Metrics m = mild::evaluate(truth, mild::loadCandidates(opt.output), opt.min_gap);
+  std::printf("recall@100%%P: %.4f\naverage precision: %.4f\nmax F1: %.4f\n", m.recall_at_100_precision,
+              m.average_precision, m.max_f1);
+  std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
+              m.scored_queries, m.true_positives, m.false_positives);
+  const mild::Decision half = mild::decideAt(truth, mild::loadCandidates(opt.output), 0.5, opt.min_gap);
+  std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision,
+              half.recall, half.right, half.wrong);
+  if (!opt.plots.empty()) {
+    mild::tools::writeOfflinePlots(opt.plots, truth, mild::loadCandidates(opt.output), m, n, opt.min_gap);
+  }
+}
+
 int run(const Options& opt) {
   mild::DetectorParams params;
   if (!opt.config.empty()) params = mild::loadDetectorParams(mild::YamlParameterSource::fromFile(opt.config));
@@ -89,178 +290,37 @@ int run(const Options& opt) {
     truth = mild::loadGroundTruth(opt.gt, static_cast<long>(seq.frames.size()));  // fail before the long run, not after
   std::vector<mild::PlanarPose> poses;
   if (!opt.poses.empty()) poses = mild::loadPlanarPoses(opt.poses, static_cast<long>(seq.frames.size()));
-  struct EstimatedPose {
-    size_t query;
-    uint64_t candidate;
-    mild::RelativePose pose;
-  };
-  std::vector<EstimatedPose> estimated;
   for (const auto& f : seq.ignored) std::cerr << "note: ignoring non-image file " << f << "\n";
 
-  std::ofstream csv(opt.output);
-  if (!csv) throw mild::InvalidInput(opt.output + ": cannot write the candidates file");
-  csv << "query,candidate,score\n";
-  std::ofstream details;
-  if (!opt.details.empty()) {
-    details.open(opt.details);
-    if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
-    details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
-               "homography_share,verified,accepted,near_past,fit_skipped,eligible,saliency,reported";
-    // The scorer's feature vector, as it computes it: scripts/fit_scoring.py fits on these columns.
-    for (const std::string& name : mild::CandidateScorer::featureNames()) details << "," << name;
-    details << "\n";
-  }
+  std::ofstream csv = openCandidatesCsv(opt);
+  std::ofstream details = openDetailsCsv(opt);
 
   mild::LoopDetector detector(params);
   const size_t n = seq.frames.size();
-  std::vector<double> extract_ms, query_ms, filter_ms, verify_ms, keyframe_ms, keyframe_cpu_ms;
-  std::vector<float> similarity_matrix;
-  if (!opt.similarity.empty()) similarity_matrix.assign(n * n, 0.0f);
-  size_t skipped = 0, features = 0;
-  mild::tools::ProgressBar progress(n, "mild_offline");
-  for (size_t i = 0; i < n; ++i) {
-    progress.update(i);
-    auto frame = readFrame(seq.frames[i], opt.scale);
-    if (!frame) {
-      ++skipped;
-      std::cerr << "\nwarning: frame " << i << " (" << seq.frames[i] << ") cannot be read as an image; skipped\n";
-      continue;
-    }
-    const double cpu_start = mild::threadCpuMs();
-    const mild::DetectionResult r = detector.process(frame->first, frame->second, seq.stamps[i], i);
-    keyframe_cpu_ms.push_back(mild::threadCpuMs() - cpu_start);
-    extract_ms.push_back(r.stats.extract_ms);
-    query_ms.push_back(r.stats.query_ms);
-    filter_ms.push_back(r.stats.filter_ms);
-    verify_ms.push_back(r.stats.verify_ms);
-    keyframe_ms.push_back(r.stats.extract_ms + r.stats.query_ms + r.stats.filter_ms + r.stats.verify_ms);
-    features += r.stats.features;
-    const auto writeDetails = [&](const mild::LoopCandidate& c, bool reported) {
-      const mild::Verification& v = c.verification;
-      details << i << "," << c.id << "," << mild::formatScore(c.probability) << ","
-              << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
-              << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
-              << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "," << (v.fit_skipped ? 1 : 0)
-              << "," << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0);
-      for (double x : detector.scorer().features(mild::LoopDetector::evidenceOf(c), v)) details << "," << x;
-      details << "\n";
-    };
-    for (const mild::LoopCandidate& c : r.candidates) {
-      // Every candidate with its published probability: one that failed verification keeps a
-      // (low) probability, which ranks it below the verified ones.
-      csv << i << "," << c.id << "," << mild::formatScore(c.probability) << "\n";
-      if (c.verification.pose.valid) estimated.push_back({i, c.id, c.verification.pose});
-      if (details.is_open()) writeDetails(c, true);
-    }
-    // Training data: the candidates judged but not reported (beyond detector/max_candidates) too.
-    if (details.is_open() && opt.fit_every_candidate) {
-      for (const mild::LoopCandidate& c : r.unreported) writeDetails(c, false);
-    }
-    if (!similarity_matrix.empty()) {
-      // Row = query frame, column = candidate frame (ids are frame indices).
-      for (size_t k = 0; k < r.similarity.size(); ++k) {
-        similarity_matrix[i * n + detector.record(static_cast<mild::KeyframeIndex>(k)).id] =
-            static_cast<float>(r.similarity[k]);
-      }
-    }
-  }
-  progress.finish();
+  const DetectionPass pass = detectOverSequence(opt, seq, detector, csv, details);
   csv.close();
   if (!csv) throw mild::InvalidInput(opt.output + ": write failed");
-  if (skipped == n)
+  if (pass.skipped == n)
     throw mild::InvalidInput(seq.image_dir + ": none of the " + std::to_string(n) + " image files could be read");
 
-  std::cout << "processed " << (n - skipped) << " of " << n << " frames (" << skipped << " unreadable, skipped), "
-            << features / std::max<size_t>(1, n - skipped) << " features per frame\n";
+  std::cout << "processed " << (n - pass.skipped) << " of " << n << " frames (" << pass.skipped
+            << " unreadable, skipped), " << pass.features / std::max<size_t>(1, n - pass.skipped)
+            << " features per frame\n";
   std::cout << "candidates: " << opt.output << "\n";
 
   if (!opt.similarity.empty()) {
-    if (!mild::tools::writeNpyFloat32(opt.similarity, similarity_matrix, n, n)) {
+    if (!mild::tools::writeNpyFloat32(opt.similarity, pass.similarity_matrix, n, n)) {
       throw mild::InvalidInput(opt.similarity + ": cannot write the similarity matrix");
     }
   }
 
   json pose_summary;
-  if (!poses.empty()) {
-    // Relative poses of the verified candidates that are true loops (all of them without --gt).
-    mild::PoseErrors errors;
-    for (const EstimatedPose& e : estimated) {
-      if (e.candidate >= poses.size()) continue;
-      if (truth && !truth->right.count({static_cast<int>(e.query), static_cast<int>(e.candidate)})) continue;
-      errors.add(e.pose, poses[e.query], poses[e.candidate]);
-    }
-    const auto rot = mild::tools::summarize(errors.rotation_deg);
-    const auto dir = mild::tools::summarize(errors.translation_deg);
-    pose_summary = {{"poses", errors.rotation_deg.size()},
-                    {"rotation_error_deg", {{"median", rot.median}, {"p95", rot.p95}}},
-                    {"translation_direction_pairs", errors.translation_deg.size()},
-                    {"translation_direction_error_deg", {{"median", dir.median}, {"p95", dir.p95}}}};
-    if (errors.rotation_deg.empty()) {
-      std::printf("relative pose: none estimated (verification needs the intrinsics verification/fx, fy, cx, cy)\n");
-    } else {
-      std::printf(
-          "relative pose of %zu verified %s: rotation error median %.2f deg (p95 %.2f); baseline direction error"
-          " median %.1f deg (p95 %.1f) over the %zu pairs >= %.1f m apart\n",
-          errors.rotation_deg.size(), truth ? "true loops" : "candidates", rot.median, rot.p95, dir.median, dir.p95,
-          errors.translation_deg.size(), errors.min_baseline_m);
-    }
-  }
+  if (!poses.empty()) pose_summary = reportRelativePoses(pass.estimated, poses, truth);
 
-  if (!opt.stats.empty()) {
-    json stats = {{"extract_ms", timingJson(extract_ms)},
-                  {"query_ms", timingJson(query_ms)},
-                  {"filter_ms", timingJson(filter_ms)},
-                  // The whole pipeline per keyframe: the four stages' sum (their own medians do not add up).
-                  {"keyframe_ms", timingJson(keyframe_ms)},
-                  // The same in this thread's CPU time: robust to other processes on the cores.
-                  {"keyframe_cpu_ms", timingJson(keyframe_cpu_ms)},
-                  {"keyframes", detector.size()},
-                  {"features", detector.database().featureCount()},
-                  {"memory_bytes", detector.memoryBytes()},
-                  {"index_memory_bytes", detector.database().index().memoryBytes()},
-                  {"discarded_buckets", detector.database().index().discardedBuckets()},
-                  {"frames", n},
-                  {"skipped_frames", skipped}};
-    if (detector.verifies()) stats["verify_ms"] = timingJson(verify_ms);
-    // Medians per window of keyframes, in order: what each stage costs as the map grows.
-    json windows = json::array();
-    const size_t w = static_cast<size_t>(opt.stats_window);
-    for (size_t begin = 0; begin < keyframe_ms.size(); begin += w) {
-      const size_t end = std::min(keyframe_ms.size(), begin + w);
-      const auto slice = [&](const std::vector<double>& v) {
-        return mild::tools::summarize(
-            std::vector<double>(v.begin() + static_cast<long>(begin), v.begin() + static_cast<long>(end)));
-      };
-      windows.push_back({{"first", begin},
-                         {"last", end - 1},
-                         {"extract_ms", slice(extract_ms).median},
-                         {"query_ms", slice(query_ms).median},
-                         {"filter_ms", slice(filter_ms).median},
-                         {"verify_ms", slice(verify_ms).median},
-                         {"keyframe_ms", slice(keyframe_ms).median},
-                         {"keyframe_cpu_ms", slice(keyframe_cpu_ms).median},
-                         {"keyframe_cpu_ms_p99", slice(keyframe_cpu_ms).p99}});
-    }
-    stats["windows"] = windows;
-    if (!pose_summary.is_null()) stats["relative_pose"] = pose_summary;
-    std::ofstream out(opt.stats);
-    out << stats.dump(2) << "\n";
-    if (!out) throw mild::InvalidInput(opt.stats + ": cannot write the stats file");
-  }
+  if (!opt.stats.empty()) writeStats(opt, pass, detector, n, pose_summary);
 
   if (truth) {
-    // Score what was written, exactly as the referee reads it.
-    const mild::Metrics m = mild::evaluate(*truth, mild::loadCandidates(opt.output), opt.min_gap);
-    std::printf("recall@100%%P: %.4f\naverage precision: %.4f\nmax F1: %.4f\n", m.recall_at_100_precision,
-                m.average_precision, m.max_f1);
-    std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
-                m.scored_queries, m.true_positives, m.false_positives);
-    const mild::Decision half = mild::decideAt(*truth, mild::loadCandidates(opt.output), 0.5, opt.min_gap);
-    std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision,
-                half.recall, half.right, half.wrong);
-    if (!opt.plots.empty()) {
-      mild::tools::writeOfflinePlots(opt.plots, *truth, mild::loadCandidates(opt.output), m, n, opt.min_gap);
-    }
+    scoreCandidates(opt, *truth, n);
   } else if (!opt.plots.empty()) {
     std::cerr << "note: --plots needs --gt (the plots compare detections with ground truth); no plots written\n";
   }

@@ -178,33 +178,38 @@ std::string fixed(double v, int digits) {
   return s.str();
 }
 
-int run(const Options& opt) {
+mild::backend::PoseGraphParams loadGraphParams(const std::string& graph_config) {
   mild::backend::PoseGraphParams graph_params;
-  if (!opt.graph_config.empty()) {
-    graph_params = mild::backend::loadPoseGraphParams(mild::YamlParameterSource::fromFile(opt.graph_config));
+  if (!graph_config.empty()) {
+    graph_params = mild::backend::loadPoseGraphParams(mild::YamlParameterSource::fromFile(graph_config));
   }
-  if (opt.help_parameters) {
-    std::cout << "| parameter | default | range | meaning |\n|---|---|---|---|\n"
-              << mild::backend::poseGraphParameterMarkdown("graph/");
-    return 0;
-  }
-  if (opt.sequence.empty()) throw mild::InvalidInput("--sequence is required");
-  const mild::tools::ImageSequence seq = mild::tools::openImageSequence(opt.sequence);
-  size_t n = seq.frames.size();
-  if (opt.frames > 0) n = std::min(n, static_cast<size_t>(opt.frames));
+  return graph_params;
+}
+
+void printParameterTable() {
+  std::cout << "| parameter | default | range | meaning |\n|---|---|---|---|\n"
+            << mild::backend::poseGraphParameterMarkdown("graph/");
+}
+
+// The first n poses of the sequence's poses.txt.
+std::vector<Pose2> truthOf(const Options& opt, const mild::tools::ImageSequence& seq, size_t n) {
   const std::vector<mild::PlanarPose> planar = mild::loadPlanarPoses(
       (std::filesystem::path(opt.sequence) / "poses.txt").string(), static_cast<long>(seq.frames.size()));
   std::vector<Pose2> truth;
   for (size_t i = 0; i < n; ++i) truth.push_back({planar[i].x, planar[i].y, planar[i].yaw});
-  const std::vector<Pose2> odometry = mild::backend::driftedOdometry(truth, opt.drift);
-  if (!opt.odometry_out.empty()) {
-    std::ofstream out(opt.odometry_out);
-    if (!out) throw mild::InvalidInput(opt.odometry_out + ": cannot write the odometry");
-    out << std::setprecision(10);
-    for (const Pose2& p : odometry) out << p.x << " " << p.y << " " << p.yaw << "\n";
-  }
+  return truth;
+}
 
-  std::vector<double> detector_ms;
+void writeOdometry(const std::string& path, const std::vector<Pose2>& odometry) {
+  std::ofstream out(path);
+  if (!out) throw mild::InvalidInput(path + ": cannot write the odometry");
+  out << std::setprecision(10);
+  for (const Pose2& p : odometry) out << p.x << " " << p.y << " " << p.yaw << "\n";
+}
+
+// --load-loops' loops among the first n frames, or the detector's (with its time per keyframe).
+std::vector<LoopMeasurement> loadOrDetectLoops(const Options& opt, const mild::tools::ImageSequence& seq, size_t n,
+                                               std::vector<double>& detector_ms) {
   std::vector<LoopMeasurement> loops;
   if (!opt.load_loops.empty()) {
     loops = loadLoops(opt.load_loops);
@@ -214,6 +219,134 @@ int run(const Options& opt) {
   } else {
     loops = detectLoops(opt, seq, n, detector_ms);
   }
+  return loops;
+}
+
+struct Figures {
+  size_t keyframes = 0;
+  double length = 0.0;
+  size_t loops = 0, metric = 0;
+  double before = 0.0, after = 0.0, after_wrong = 0.0;  // ATE RMSE: odometry, clean graph, graph with wrong loops
+  size_t rejected = 0, replaced = 0, wrong_rejected = 0, wrong_kept = 0;
+  std::vector<double> updates;  // both graphs' update times
+  mild::tools::TimingSummary timing;
+};
+
+Figures measure(const std::vector<Pose2>& truth, const std::vector<Pose2>& odometry,
+                const std::vector<LoopMeasurement>& loops, const GraphRun& clean, const GraphRun& wrong,
+                size_t replaced) {
+  Figures f;
+  f.keyframes = truth.size();
+  f.replaced = replaced;
+  f.before = mild::backend::absoluteTrajectoryError(odometry, truth);
+  f.after = mild::backend::absoluteTrajectoryError(clean.estimate, truth);
+  f.after_wrong = mild::backend::absoluteTrajectoryError(wrong.estimate, truth);
+  f.updates = clean.update_ms;
+  f.updates.insert(f.updates.end(), wrong.update_ms.begin(), wrong.update_ms.end());
+  f.timing = mild::tools::summarize(f.updates);
+  for (const auto& l : clean.loops) f.rejected += !l.inlier;
+  for (size_t k = 0; k < wrong.loops.size(); ++k) {
+    const auto& l = wrong.loops[k];
+    const bool is_wrong =
+        std::hypot(truth[l.query].x - truth[l.candidate].x, truth[l.query].y - truth[l.candidate].y) > 10.0;
+    if (is_wrong) (l.inlier ? f.wrong_kept : f.wrong_rejected) += 1;
+  }
+  f.loops = loops.size();
+  for (const auto& l : loops) f.metric += l.metric;
+  f.length = mild::backend::pathLength(truth);
+  return f;
+}
+
+void printFigures(const Options& opt, const Figures& f, const std::vector<double>& detector_ms) {
+  std::cout << "sequence " << opt.sequence << ": " << f.keyframes << " keyframes, " << fixed(f.length, 1) << " m, "
+            << f.loops << " accepted loops with a relative pose (" << f.metric << " metric)\n";
+  std::cout << "ATE RMSE odometry " << fixed(f.before, 3) << " m, after the pose graph " << fixed(f.after, 3)
+            << " m (ratio " << fixed(f.after / f.before, 3) << "; " << f.rejected << " loops rejected by the loss)\n";
+  std::cout << "with " << f.replaced << " of " << f.loops << " loops wrong: ATE " << fixed(f.after_wrong, 3)
+            << " m (ratio " << fixed(f.after_wrong / f.before, 3) << "; wrong loops rejected " << f.wrong_rejected
+            << ", kept " << f.wrong_kept << ")\n";
+  std::cout << "update time: " << f.updates.size() << " updates, median " << fixed(f.timing.median, 1) << " ms, p95 "
+            << fixed(f.timing.p95, 1) << " ms, max " << fixed(f.timing.max, 1) << " ms";
+  if (!detector_ms.empty()) {
+    std::cout << " (detector per keyframe: median " << fixed(mild::tools::summarize(detector_ms).median, 1) << " ms)";
+  }
+  std::cout << "\n";
+}
+
+void writeJson(const Options& opt, const Figures& f) {
+  json j = {{"sequence", opt.sequence},
+            {"keyframes", f.keyframes},
+            {"length_m", f.length},
+            {"loops", f.loops},
+            {"metric_loops", f.metric},
+            {"ate_before", f.before},
+            {"ate_after", f.after},
+            {"ratio", f.after / f.before},
+            {"rejected", f.rejected},
+            {"wrong_loops", f.replaced},
+            {"ate_after_wrong", f.after_wrong},
+            {"ratio_wrong", f.after_wrong / f.before},
+            {"wrong_rejected", f.wrong_rejected},
+            {"wrong_kept", f.wrong_kept},
+            {"updates", f.updates.size()},
+            {"update_ms", {{"median", f.timing.median}, {"p95", f.timing.p95}, {"max", f.timing.max}}},
+            {"drift",
+             {{"scale_error", opt.drift.scale_error},
+              {"translation_noise", opt.drift.translation_noise},
+              {"heading_bias", opt.drift.heading_bias},
+              {"heading_random_walk", opt.drift.heading_random_walk},
+              {"seed", opt.drift.seed}}}};
+  std::ofstream out(opt.json_out);
+  if (!out) throw mild::InvalidInput(opt.json_out + ": cannot write");
+  out << j.dump(2) << "\n";
+}
+
+// The trajectories (truth, aligned odometry, aligned estimate) and the clean graph's loops, as CSV
+// for --trajectories, and drawn with --plot.
+void writeTrajectories(const Options& opt, const std::vector<Pose2>& truth, const std::vector<Pose2>& odometry,
+                       const GraphRun& clean, const Figures& f) {
+  const std::string path = opt.trajectories.empty() ? opt.plot + ".csv" : opt.trajectories;
+  const Pose2 a_odo = mild::backend::alignTrajectory(odometry, truth);
+  const Pose2 a_after = mild::backend::alignTrajectory(clean.estimate, truth);
+  std::ofstream out(path);
+  if (!out) throw mild::InvalidInput(path + ": cannot write the trajectories");
+  out << "frame,true_x,true_y,odometry_x,odometry_y,after_x,after_y\n" << std::setprecision(8);
+  for (size_t i = 0; i < f.keyframes; ++i) {
+    const Pose2 o = mild::backend::compose(a_odo, odometry[i]);
+    const Pose2 e = mild::backend::compose(a_after, clean.estimate[i]);
+    out << i << "," << truth[i].x << "," << truth[i].y << "," << o.x << "," << o.y << "," << e.x << "," << e.y << "\n";
+  }
+  out.close();
+  const std::string loops_path = path + ".loops.csv";
+  std::ofstream lo(loops_path);
+  lo << "query,candidate,inlier\n";
+  for (const auto& l : clean.loops) lo << l.query << "," << l.candidate << "," << (l.inlier ? 1 : 0) << "\n";
+  lo.close();
+  if (!opt.plot.empty()) {
+    const std::string command = "/usr/bin/python3 '" + mild::tools::findScript("plot_pose_graph.py") + "' '" + path +
+                                "' '" + loops_path + "' '" + opt.plot + "' --title '" +
+                                std::filesystem::path(opt.sequence).filename().string() + ": ATE " +
+                                fixed(f.before, 2) + " m -> " + fixed(f.after, 2) + " m'";
+    if (std::system(command.c_str()) != 0) throw mild::InvalidInput("plotting failed: " + command);
+  }
+}
+
+int run(const Options& opt) {
+  const mild::backend::PoseGraphParams graph_params = loadGraphParams(opt.graph_config);
+  if (opt.help_parameters) {
+    printParameterTable();
+    return 0;
+  }
+  if (opt.sequence.empty()) throw mild::InvalidInput("--sequence is required");
+  const mild::tools::ImageSequence seq = mild::tools::openImageSequence(opt.sequence);
+  size_t n = seq.frames.size();
+  if (opt.frames > 0) n = std::min(n, static_cast<size_t>(opt.frames));
+  const std::vector<Pose2> truth = truthOf(opt, seq, n);
+  const std::vector<Pose2> odometry = mild::backend::driftedOdometry(truth, opt.drift);
+  if (!opt.odometry_out.empty()) writeOdometry(opt.odometry_out, odometry);
+
+  std::vector<double> detector_ms;
+  const std::vector<LoopMeasurement> loops = loadOrDetectLoops(opt, seq, n, detector_ms);
   if (!opt.save_loops.empty()) saveLoops(opt.save_loops, loops);
 
   const GraphRun clean = runGraph(graph_params, odometry, loops);
@@ -222,92 +355,10 @@ int run(const Options& opt) {
       withWrongLoops(loops, truth, opt.wrong_fraction, opt.wrong_seed, replaced);
   const GraphRun wrong = runGraph(graph_params, odometry, corrupted);
 
-  const double before = mild::backend::absoluteTrajectoryError(odometry, truth);
-  const double after = mild::backend::absoluteTrajectoryError(clean.estimate, truth);
-  const double after_wrong = mild::backend::absoluteTrajectoryError(wrong.estimate, truth);
-  std::vector<double> updates = clean.update_ms;
-  updates.insert(updates.end(), wrong.update_ms.begin(), wrong.update_ms.end());
-  const auto timing = mild::tools::summarize(updates);
-  size_t rejected = 0, wrong_rejected = 0, wrong_kept = 0;
-  for (const auto& l : clean.loops) rejected += !l.inlier;
-  for (size_t k = 0; k < wrong.loops.size(); ++k) {
-    const auto& l = wrong.loops[k];
-    const bool is_wrong =
-        std::hypot(truth[l.query].x - truth[l.candidate].x, truth[l.query].y - truth[l.candidate].y) > 10.0;
-    if (is_wrong) (l.inlier ? wrong_kept : wrong_rejected) += 1;
-  }
-  size_t metric = 0;
-  for (const auto& l : loops) metric += l.metric;
-  const double length = mild::backend::pathLength(truth);
-
-  std::cout << "sequence " << opt.sequence << ": " << n << " keyframes, " << fixed(length, 1) << " m, " << loops.size()
-            << " accepted loops with a relative pose (" << metric << " metric)\n";
-  std::cout << "ATE RMSE odometry " << fixed(before, 3) << " m, after the pose graph " << fixed(after, 3)
-            << " m (ratio " << fixed(after / before, 3) << "; " << rejected << " loops rejected by the loss)\n";
-  std::cout << "with " << replaced << " of " << loops.size() << " loops wrong: ATE " << fixed(after_wrong, 3)
-            << " m (ratio " << fixed(after_wrong / before, 3) << "; wrong loops rejected " << wrong_rejected
-            << ", kept " << wrong_kept << ")\n";
-  std::cout << "update time: " << updates.size() << " updates, median " << fixed(timing.median, 1) << " ms, p95 "
-            << fixed(timing.p95, 1) << " ms, max " << fixed(timing.max, 1) << " ms";
-  if (!detector_ms.empty()) {
-    std::cout << " (detector per keyframe: median " << fixed(mild::tools::summarize(detector_ms).median, 1) << " ms)";
-  }
-  std::cout << "\n";
-
-  if (!opt.json_out.empty()) {
-    json j = {{"sequence", opt.sequence},
-              {"keyframes", n},
-              {"length_m", length},
-              {"loops", loops.size()},
-              {"metric_loops", metric},
-              {"ate_before", before},
-              {"ate_after", after},
-              {"ratio", after / before},
-              {"rejected", rejected},
-              {"wrong_loops", replaced},
-              {"ate_after_wrong", after_wrong},
-              {"ratio_wrong", after_wrong / before},
-              {"wrong_rejected", wrong_rejected},
-              {"wrong_kept", wrong_kept},
-              {"updates", updates.size()},
-              {"update_ms", {{"median", timing.median}, {"p95", timing.p95}, {"max", timing.max}}},
-              {"drift",
-               {{"scale_error", opt.drift.scale_error},
-                {"translation_noise", opt.drift.translation_noise},
-                {"heading_bias", opt.drift.heading_bias},
-                {"heading_random_walk", opt.drift.heading_random_walk},
-                {"seed", opt.drift.seed}}}};
-    std::ofstream out(opt.json_out);
-    if (!out) throw mild::InvalidInput(opt.json_out + ": cannot write");
-    out << j.dump(2) << "\n";
-  }
-  if (!opt.trajectories.empty() || !opt.plot.empty()) {
-    const std::string path = opt.trajectories.empty() ? opt.plot + ".csv" : opt.trajectories;
-    const Pose2 a_odo = mild::backend::alignTrajectory(odometry, truth);
-    const Pose2 a_after = mild::backend::alignTrajectory(clean.estimate, truth);
-    std::ofstream out(path);
-    if (!out) throw mild::InvalidInput(path + ": cannot write the trajectories");
-    out << "frame,true_x,true_y,odometry_x,odometry_y,after_x,after_y\n" << std::setprecision(8);
-    for (size_t i = 0; i < n; ++i) {
-      const Pose2 o = mild::backend::compose(a_odo, odometry[i]);
-      const Pose2 e = mild::backend::compose(a_after, clean.estimate[i]);
-      out << i << "," << truth[i].x << "," << truth[i].y << "," << o.x << "," << o.y << "," << e.x << "," << e.y
-          << "\n";
-    }
-    out.close();
-    const std::string loops_path = path + ".loops.csv";
-    std::ofstream lo(loops_path);
-    lo << "query,candidate,inlier\n";
-    for (const auto& l : clean.loops) lo << l.query << "," << l.candidate << "," << (l.inlier ? 1 : 0) << "\n";
-    lo.close();
-    if (!opt.plot.empty()) {
-      const std::string command = "/usr/bin/python3 '" + mild::tools::findScript("plot_pose_graph.py") + "' '" + path +
-                                  "' '" + loops_path + "' '" + opt.plot + "' --title '" +
-                                  std::filesystem::path(opt.sequence).filename().string() + ": ATE " +
-                                  fixed(before, 2) + " m -> " + fixed(after, 2) + " m'";
-      if (std::system(command.c_str()) != 0) throw mild::InvalidInput("plotting failed: " + command);
-    }
-  }
+  const Figures figures = measure(truth, odometry, loops, clean, wrong, replaced);
+  printFigures(opt, figures, detector_ms);
+  if (!opt.json_out.empty()) writeJson(opt, figures);
+  if (!opt.trajectories.empty() || !opt.plot.empty()) writeTrajectories(opt, truth, odometry, clean, figures);
   return 0;
 }
 
