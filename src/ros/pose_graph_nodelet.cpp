@@ -42,6 +42,8 @@ namespace {
 
 using mild::backend::Pose2;
 
+constexpr double kTfHistorySeconds = 120.0;
+
 geometry_msgs::Quaternion yawQuaternion(double yaw) {
   geometry_msgs::Quaternion q;
   q.w = std::cos(yaw / 2);
@@ -127,7 +129,9 @@ class PoseGraphNodelet : public nodelet::Nodelet {
     builder.max_odometry_step = settings_.max_odometry_step;
     builder_ = std::make_unique<mild::backend::GraphBuilder>(settings_.graph, builder);
 
-    tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+    // tf's default 10 s of history is less than a busy detector's lag: a keyframe answered 10 s after
+    // its stamp would find no pose and be dropped. Two minutes, as the odometry topic's buffer holds more.
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>(ros::Duration(kTfHistorySeconds));
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
     trajectory_pub_ = nh.advertise<nav_msgs::Path>("trajectory", 1, true);
     odometry_path_pub_ = nh.advertise<nav_msgs::Path>("odometry_path", 1, true);
