@@ -49,10 +49,10 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
   try {
     const mild::ConfinedFile file = resolve("", false);
     if (!file.exists()) return "database " + file.display() + " does not exist yet: starting with an empty map";
-    mild::PreparedLoad prepared = mild::prepareLoad(detector(shared), file, false, max_bytes_);
+    mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, false, max_bytes_);
     const std::string message = prepared.report.message;
     const auto lock = shared.lock();
-    mild::commitLoad(detector(shared), std::move(prepared));
+    mild::commitLoad(detector(shared).map(), std::move(prepared));
     shared.team->mapChanged(robot_);  // the file holds it: no change to save
     return message;
   } catch (const std::exception& e) {
@@ -68,9 +68,9 @@ std::string DatabaseStore::save(SharedDetector& shared, const std::string& reque
   const mild::ConfinedFile file = resolve(requested, true);
   const auto lock = shared.lock();
   if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
-  mild::saveDetector(detector(shared), file);
+  mild::saveMap(detector(shared).map(), file);
   if (file.display() == database_display_) saved_changes_ = shared.changes;
-  return "saved " + std::to_string(detector(shared).size()) + " keyframes to " + file.display();
+  return "saved " + std::to_string(detector(shared).map().size()) + " keyframes to " + file.display();
 }
 
 std::string DatabaseStore::autosave(SharedDetector& shared) {
@@ -85,10 +85,10 @@ std::string DatabaseStore::autosave(SharedDetector& shared) {
 mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
   const mild::ConfinedFile file = resolve(requested, false);
   // LoopDetector's parameters never change after construction: preparing needs no lock.
-  mild::PreparedLoad prepared = mild::prepareLoad(detector(shared), file, continue_session, max_bytes_);
+  mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, continue_session, max_bytes_);
   mild::LoadReport report = prepared.report;
   const auto lock = shared.lock();
-  mild::commitLoad(detector(shared), std::move(prepared));
+  mild::commitLoad(detector(shared).map(), std::move(prepared));
   shared.team->mapChanged(robot_);
   ++shared.changes;
   // A map loaded by hand is the user's decision: the start-up failure no longer stands in the way.
@@ -99,13 +99,13 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
 
 mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string& requested) {
   const mild::ConfinedFile file = resolve(requested, false);
-  mild::DetectorState state = mild::readDetectorFile(file, max_bytes_);
+  mild::MapState state = mild::readMapFile(file, max_bytes_);
   const auto lock = shared.lock();
   // Merging into the empty map of a failed start-up would save over the map that failed: refused.
   if (!failure(shared).empty()) {
     throw mild::InvalidInput(failure(shared) + "; load_database without merge replaces it");
   }
-  mild::LoadReport report = mild::mergeState(detector(shared), std::move(state), file.display());
+  mild::LoadReport report = mild::mergeState(detector(shared).map(), std::move(state), file.display());
   shared.team->mapChanged(robot_);
   ++shared.changes;
   return report;

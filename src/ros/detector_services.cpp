@@ -52,9 +52,9 @@ void DetectorServices::shutdown() {
 bool DetectorServices::sparseMatch(mild_lcd::SparseMatch::Request& request, mild_lcd::SparseMatch::Response& response) {
   const auto stored = [this](uint64_t id) -> std::optional<mild::Features> {
     const auto lock = shared_.lock();  // a copy, then the lock is free again
-    auto k = detector().find(id);
+    auto k = detector().map().find(id);
     if (!k) return std::nullopt;
-    return detector().features(*k);
+    return detector().map().features(*k);
   };
   {
     // The verification parameters may have been retuned (dynamic_reconfigure) since it was built.
@@ -117,7 +117,7 @@ bool DetectorServices::load(mild_lcd::LoadDatabase::Request& request, mild_lcd::
     ROS_WARN_STREAM_NAMED(log_name_, "load_database: " << e.what());
   }
   const auto lock = shared_.lock();
-  response.keyframes = static_cast<uint32_t>(detector().size());
+  response.keyframes = static_cast<uint32_t>(detector().map().size());
   worker_.refreshSnapshot(*shared_.team);
   return true;
 }

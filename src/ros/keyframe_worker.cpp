@@ -19,22 +19,20 @@ KeyframeWorker::~KeyframeWorker() { stop(); }
 
 void KeyframeWorker::start() {
   if (thread_.joinable()) return;
-  if (!pipelined_) {
-    thread_ = std::thread([this] { runOneThread(); });
-    return;
-  }
-  // Stage 1's extractor is built once, from the team's own features/ parameters, rather than taken
-  // from a detector: extractors are not thread-safe, and the detector's serves under the lock. A
-  // copy made once stays the detector's equal: features/ are start-up parameters (retune refuses
-  // them), a load, merge or reset replaces a map but not its parameters, every robot of a team has
-  // the same ones, and the team outlives the worker (the nodelet builds it first).
+  // The front-end is built once, from the team's own features/ parameters: they are start-up
+  // parameters (retune refuses them), a load, merge or reset replaces a map but not its
+  // parameters, every robot of a team has the same ones, and the team outlives the worker (the
+  // nodelet builds it first).
   mild::FeatureParams features;
   {
     const auto lock = shared_.lock();
     features = shared_.team->params().features;
   }
-  extractor_ = mild::makeFeatureExtractor(features);
-  descriptor_bytes_ = features.descriptorBytes();
+  front_end_ = std::make_unique<mild::FeatureFrontEnd>(features);
+  if (!pipelined_) {
+    thread_ = std::thread([this] { runOneThread(); });
+    return;
+  }
   thread_ = std::thread([this] { runDetector(); });
   extraction_thread_ = std::thread([this] { runExtraction(); });
 }
@@ -108,7 +106,7 @@ void KeyframeWorker::startup() {
 void KeyframeWorker::runOneThread() {
   startup();
   while (auto item = queue_.pop()) {
-    process(stage(std::move(*item), nullptr));
+    process(stage(std::move(*item)));
     queue_.done();
   }
 }
@@ -124,7 +122,7 @@ void KeyframeWorker::runExtraction() {
     }
     std::optional<KeyframeInputPtr> item = queue_.pop();
     if (!item) break;
-    Staged staged = stage(std::move(*item), extractor_.get());
+    Staged staged = stage(std::move(*item));
     {
       std::lock_guard<std::mutex> lock(handoff_mutex_);
       if (!stopping_) {
@@ -160,31 +158,24 @@ void KeyframeWorker::runDetector() {
   }
 }
 
-KeyframeWorker::Staged KeyframeWorker::stage(KeyframeInputPtr input, const mild::FeatureExtractor* extractor) const {
+KeyframeWorker::Staged KeyframeWorker::stage(KeyframeInputPtr input) const {
   Staged staged;
   staged.header = input->header();
   try {
-    staged.observation = input->observe(limits_, staged.image);
+    staged.observation = front_end_->extract(input->observe(limits_, staged.image));
   } catch (const std::exception& e) {
+    staged.observation.reset();
     staged.error = e.what();
   }
-  if (staged.observation && extractor) {
-    try {
-      // A copy: the image observation is a few headers, and it is kept should extraction fail.
-      staged.observation = mild::extractFeatures(*staged.observation, *extractor, descriptor_bytes_);
-    } catch (const std::exception&) {
-      // Left as the image: the detector extracts it again under its lock and refuses it as it
-      // always has, with the same message and after the same checks (an id already in use first).
-    }
-  }
   staged.input = std::move(input);  // the decoded image may point into the message
-  if (hooks_.staged) hooks_.staged(staged.header, staged.observation && !staged.observation->image);
+  if (hooks_.staged) hooks_.staged(staged.header, staged.observation.has_value());
   return staged;
 }
 
 void KeyframeWorker::refreshSnapshot(const mild::RobotTeam& team) {
   size_t discarded_buckets = 0;
-  for (size_t r = 0; r < team.size(); ++r) discarded_buckets += team.robot(r).database().index().discardedBuckets();
+  for (size_t r = 0; r < team.size(); ++r)
+    discarded_buckets += team.robot(r).map().database().index().discardedBuckets();
   std::lock_guard<std::mutex> lock(stats_mutex_);
   stats_.keyframes = team.keyframes();
   stats_.features = team.features();
@@ -212,12 +203,12 @@ void KeyframeWorker::process(Staged staged) {
     // Only this call changes the detector; it throws before changing anything.
     out.result = team.process(std::move(observation));
     ++shared_.changes;
-    out.database_size = team.robot(robot).size();
+    out.database_size = team.robot(robot).map().size();
     if (keypoints) {
-      out.query_keypoints = team.robot(robot).record(out.result.query_index).keypoints;
+      out.query_keypoints = team.robot(robot).map().record(out.result.query_index).keypoints;
       if (!out.result.candidates.empty()) {
         const mild::LoopCandidate& best = out.result.candidates.front();
-        out.candidate_keypoints = team.robot(best.robot).record(best.index).keypoints;
+        out.candidate_keypoints = team.robot(best.robot).map().record(best.index).keypoints;
       }
     }
     // memoryBytes() walks every keyframe: once a second.

@@ -35,6 +35,7 @@
 #include "common/timing_summary.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
@@ -144,7 +145,7 @@ InsertTiming insertAll(Database& db, const KeyframeAt& keyframe_at, size_t n) {
 
 // Save and load times of a detector holding n keyframes (with keypoints, as a real one).
 json measurePersistence(const KeyframeAt& keyframe_at, size_t n) {
-  mild::DetectorState state;
+  mild::MapState state;
   state.next_id = n;
   for (size_t k = 0; k < n; ++k) {
     state.descriptors.push_back(keyframe_at(k));
@@ -160,14 +161,14 @@ json measurePersistence(const KeyframeAt& keyframe_at, size_t n) {
   params.verification.enabled = false;
   params.features.descriptor_bytes = state.descriptors.front().front().bytes;
   mild::LoopDetector detector(params);
-  detector.restore(std::move(state), false);
+  detector.map().restore(std::move(state), false);
   const fs::path file = fs::temp_directory_path() / ("mild_bench_scale_" + std::to_string(::getpid()) + ".mild");
   auto t = Clock::now();
-  mild::saveDetector(detector, file.string());
+  mild::saveMap(detector.map(), file.string());
   const double save_s = msSince(t) / 1000.0;
   mild::LoopDetector loaded(params);
   t = Clock::now();
-  const mild::LoadReport report = mild::loadDetector(loaded, file.string(), true);
+  const mild::LoadReport report = mild::loadMap(loaded.map(), file.string(), true);
   const double load_s = msSince(t) / 1000.0;
   const double file_mb = static_cast<double>(fs::file_size(file)) / 1e6;
   fs::remove(file);

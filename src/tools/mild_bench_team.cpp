@@ -22,6 +22,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
 
 namespace {
@@ -72,15 +73,16 @@ int run(const Options& opt) {
     std::vector<std::string> names;
     for (int r = 0; r < robots; ++r) names.push_back("robot" + std::to_string(r + 1));
     mild::RobotTeam team(params, names);
+    const mild::FeatureFrontEnd front_end(params.features);
     std::vector<double> cpu_ms;
     size_t inter_robot = 0;
     for (int i = 0; i < opt.keyframes; ++i) {
       for (int r = 0; r < robots; ++r) {
         const double stamp = 0.1 * i;  // every robot at 10 Hz
         const double start = mild::threadCpuMs();
-        const mild::DetectionResult result =
-            team.process(static_cast<size_t>(r), walks[static_cast<size_t>(r)][static_cast<size_t>(i)],
-                         mild::PixelFormat::kGray, stamp, static_cast<uint64_t>(i));
+        const mild::DetectionResult result = team.process(front_end.extract(
+            mild::Observation::ofImage(walks[static_cast<size_t>(r)][static_cast<size_t>(i)], mild::PixelFormat::kGray,
+                                       stamp, static_cast<uint64_t>(i), {}, static_cast<size_t>(r))));
         cpu_ms.push_back(mild::threadCpuMs() - start);
         for (const mild::LoopCandidate& c : result.candidates) inter_robot += c.robot != static_cast<uint32_t>(r);
       }

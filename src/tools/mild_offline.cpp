@@ -22,6 +22,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
@@ -148,7 +149,7 @@ void writeCandidates(const Options& opt, size_t i, const mild::DetectionResult& 
 void recordSimilarityRow(size_t i, size_t n, const mild::DetectionResult& r, const mild::LoopDetector& detector,
                          std::vector<float>& similarity_matrix) {
   for (size_t k = 0; k < r.similarity.size(); ++k) {
-    similarity_matrix[i * n + detector.record(static_cast<mild::KeyframeIndex>(k)).id] =
+    similarity_matrix[i * n + detector.map().record(static_cast<mild::KeyframeIndex>(k)).id] =
         static_cast<float>(r.similarity[k]);
   }
 }
@@ -158,6 +159,7 @@ DetectionPass detectOverSequence(const Options& opt, const mild::tools::ImageSeq
   const size_t n = seq.frames.size();
   DetectionPass pass;
   if (!opt.similarity.empty()) pass.similarity_matrix.assign(n * n, 0.0f);
+  const mild::FeatureFrontEnd front_end(detector.params().features);
   mild::tools::ProgressBar progress(n, "mild_offline");
   for (size_t i = 0; i < n; ++i) {
     progress.update(i);
@@ -168,7 +170,8 @@ DetectionPass detectOverSequence(const Options& opt, const mild::tools::ImageSeq
       continue;
     }
     const double cpu_start = mild::threadCpuMs();
-    const mild::DetectionResult r = detector.process(frame->first, frame->second, seq.stamps[i], i);
+    const mild::DetectionResult r =
+        detector.process(front_end.extract(mild::Observation::ofImage(frame->first, frame->second, seq.stamps[i], i)));
     pass.times.keyframe_cpu_ms.push_back(mild::threadCpuMs() - cpu_start);
     recordStageTimes(r.stats, pass.times);
     pass.features += r.stats.features;
@@ -238,11 +241,11 @@ void writeStats(const Options& opt, const DetectionPass& pass, const mild::LoopD
                 {"keyframe_ms", timingJson(times.keyframe_ms)},
                 // The same in this thread's CPU time: robust to other processes on the cores.
                 {"keyframe_cpu_ms", timingJson(times.keyframe_cpu_ms)},
-                {"keyframes", detector.size()},
-                {"features", detector.database().featureCount()},
-                {"memory_bytes", detector.memoryBytes()},
-                {"index_memory_bytes", detector.database().index().memoryBytes()},
-                {"discarded_buckets", detector.database().index().discardedBuckets()},
+                {"keyframes", detector.map().size()},
+                {"features", detector.map().database().featureCount()},
+                {"memory_bytes", detector.map().memoryBytes()},
+                {"index_memory_bytes", detector.map().database().index().memoryBytes()},
+                {"discarded_buckets", detector.map().database().index().discardedBuckets()},
                 {"frames", n},
                 {"skipped_frames", pass.skipped}};
   if (detector.verifies()) stats["verify_ms"] = timingJson(times.verify_ms);

@@ -27,6 +27,7 @@
 #include "mild_lcd/backend/trajectory.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
 #include "offline_plots.hpp"
@@ -58,13 +59,15 @@ std::vector<LoopMeasurement> detectLoops(const Options& opt, const mild::tools::
         "config/bench_camera.yaml) for loops with a relative pose");
   }
   mild::LoopDetector detector(params);
+  const mild::FeatureFrontEnd front_end(params.features);
   std::vector<LoopMeasurement> loops;
   mild::tools::ProgressBar progress(n, "mild_pose_graph_eval");
   for (size_t i = 0; i < n; ++i) {
     progress.update(i);
     const cv::Mat image = cv::imread(seq.frames[i], cv::IMREAD_GRAYSCALE);
     if (image.empty()) throw mild::InvalidInput(seq.frames[i] + ": cannot read the image");
-    const mild::DetectionResult r = detector.process(image, mild::PixelFormat::kGray, seq.stamps[i], i);
+    const mild::DetectionResult r = detector.process(
+        front_end.extract(mild::Observation::ofImage(image, mild::PixelFormat::kGray, seq.stamps[i], i)));
     detector_ms.push_back(r.stats.extract_ms + r.stats.query_ms + r.stats.filter_ms + r.stats.verify_ms);
     for (const mild::LoopCandidate& c : r.candidates) {
       const mild::RelativePose& p = c.verification.pose;

@@ -19,6 +19,7 @@
 #include "fixture_params.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "test_images.hpp"
 
@@ -34,7 +35,7 @@ using test::fixtureParams;
 
 void process(LoopDetector& d, size_t first, size_t last, std::vector<DetectionResult>* out = nullptr) {
   for (size_t i = first; i < last; ++i) {
-    DetectionResult r = d.process(fixtureFrames()[i], PixelFormat::kGray, 0.5 * i);
+    DetectionResult r = processImage(d, fixtureFrames()[i], PixelFormat::kGray, 0.5 * i);
     if (out) out->push_back(std::move(r));
   }
 }
@@ -73,14 +74,14 @@ TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {
 
     LoopDetector first(params);
     process(first, 0, 35);
-    saveDetector(first, path("map.mild"));
+    saveMap(first.map(), path("map.mild"));
     LoopDetector resumed(params);
-    const LoadReport report = loadDetector(resumed, path("map.mild"), /*continue_session=*/true);
+    const LoadReport report = loadMap(resumed.map(), path("map.mild"), /*continue_session=*/true);
     EXPECT_EQ(report.keyframes, 35u);
-    EXPECT_EQ(resumed.size(), 35u);
-    EXPECT_EQ(resumed.nextId(), 35u);
-    EXPECT_EQ(resumed.database().index().entryCount(), first.database().index().entryCount());
-    EXPECT_EQ(resumed.filter().saveState(), first.filter().saveState()) << "the filter state, bit for bit";
+    EXPECT_EQ(resumed.map().size(), 35u);
+    EXPECT_EQ(resumed.map().nextId(), 35u);
+    EXPECT_EQ(resumed.map().database().index().entryCount(), first.map().database().index().entryCount());
+    EXPECT_EQ(resumed.map().filter().saveState(), first.map().filter().saveState()) << "the filter state, bit for bit";
     std::vector<DetectionResult> got;
     process(resumed, 35, 60, &got);
     ASSERT_EQ(got.size(), 25u);
@@ -96,13 +97,13 @@ TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {
 TEST_F(DatabaseFile, ANewSessionOnAStoredMapMatchesItsNewestKeyframesAtOnce) {
   LoopDetector yesterday(fixtureParams());
   process(yesterday, 0, 30);
-  saveDetector(yesterday, path("map.mild"));
+  saveMap(yesterday.map(), path("map.mild"));
 
   // Today the robot starts where yesterday's run ended: keyframe 29's place.
   LoopDetector today(fixtureParams());
-  loadDetector(today, path("map.mild"), /*continue_session=*/false);
-  EXPECT_EQ(today.sessionStart(), 30u);
-  const DetectionResult r = today.process(fixtureFrames()[29], PixelFormat::kGray, 100.0);
+  loadMap(today.map(), path("map.mild"), /*continue_session=*/false);
+  EXPECT_EQ(today.map().sessionStart(), 30u);
+  const DetectionResult r = processImage(today, fixtureFrames()[29], PixelFormat::kGray, 100.0);
   EXPECT_EQ(r.query_id, 30u) << "ids continue after the stored ones";
   ASSERT_EQ(r.stats.eligible_keyframes, 30u) << "stored keyframes are not a moment ago";
   ASSERT_FALSE(r.similarity.empty());
@@ -113,33 +114,33 @@ TEST_F(DatabaseFile, ANewSessionOnAStoredMapMatchesItsNewestKeyframesAtOnce) {
   DetectorParams fixed = fixtureParams();
   fixed.candidates.near_past = false;  // the fixed exclusion alone (23 keyframes are too few for a background)
   LoopDetector resumed(fixed);
-  loadDetector(resumed, path("map.mild"), /*continue_session=*/true);
-  EXPECT_EQ(resumed.process(fixtureFrames()[29], PixelFormat::kGray, 100.0).stats.eligible_keyframes, 23u);
+  loadMap(resumed.map(), path("map.mild"), /*continue_session=*/true);
+  EXPECT_EQ(processImage(resumed, fixtureFrames()[29], PixelFormat::kGray, 100.0).stats.eligible_keyframes, 23u);
 }
 
 TEST_F(DatabaseFile, BadFilesAreClearErrorsAndLeaveTheDetectorAsItWas) {
   LoopDetector source(fixtureParams());
   process(source, 0, 12);
-  saveDetector(source, path("good.mild"));
+  saveMap(source.map(), path("good.mild"));
   const std::vector<uint8_t> good = bytes(path("good.mild"));
   ASSERT_GT(good.size(), 1000u);
 
   LoopDetector running(fixtureParams());
   process(running, 20, 30);
-  const size_t size_before = running.size();
-  const uint64_t next_before = running.nextId();
+  const size_t size_before = running.map().size();
+  const uint64_t next_before = running.map().nextId();
 
   auto expectRejected = [&](const std::vector<uint8_t>& data, const std::string& words) {
     write(path("bad.mild"), data);
     try {
-      loadDetector(running, path("bad.mild"), true);
+      loadMap(running.map(), path("bad.mild"), true);
       ADD_FAILURE() << "accepted a bad file (" << words << ")";
     } catch (const InvalidInput& e) {
       EXPECT_NE(std::string(e.what()).find(path("bad.mild")), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
     }
-    EXPECT_EQ(running.size(), size_before);
-    EXPECT_EQ(running.nextId(), next_before);
+    EXPECT_EQ(running.map().size(), size_before);
+    EXPECT_EQ(running.map().nextId(), next_before);
   };
   expectRejected({}, "empty");
   expectRejected(std::vector<uint8_t>(good.begin(), good.begin() + 20), "not a mild_lcd database");
@@ -156,23 +157,23 @@ TEST_F(DatabaseFile, BadFilesAreClearErrorsAndLeaveTheDetectorAsItWas) {
   header[9] ^= 1;  // the version, without fixing the header checksum
   expectRejected(header, "corrupt header");
   expectRejected(std::vector<uint8_t>(5000, 0xAB), "not a mild_lcd database");
-  EXPECT_THROW(loadDetector(running, path("missing.mild"), true), IoError);
+  EXPECT_THROW(loadMap(running.map(), path("missing.mild"), true), IoError);
 
   // The running detector still works and still owns its keyframes.
-  EXPECT_EQ(running.process(fixtureFrames()[31], PixelFormat::kGray, 15.5).query_id, next_before);
+  EXPECT_EQ(processImage(running, fixtureFrames()[31], PixelFormat::kGray, 15.5).query_id, next_before);
 }
 
 TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
   LoopDetector source(fixtureParams());
   process(source, 0, 3);
-  saveDetector(source, path("map.mild"));
+  saveMap(source.map(), path("map.mild"));
   std::vector<uint8_t> data = bytes(path("map.mild"));
   data[8] = 4;  // format version 4, with a header checksum that matches it
   const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
   std::memcpy(data.data() + 28, &header_crc, 4);
   write(path("v4.mild"), data);
   try {
-    readDetectorFile(path("v4.mild"));
+    readMapFile(path("v4.mild"));
     FAIL() << "read a version-4 file";
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("format version 4; this mild_lcd reads versions 1 to 3"), std::string::npos)
@@ -184,10 +185,10 @@ TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
 TEST_F(DatabaseFile, EachKeyframesCameraIsKept) {
   LoopDetector source(fixtureParams());
   const CameraIntrinsics camera{256.0, 255.0, 159.5, 119.5};
-  source.process(fixtureFrames()[0], PixelFormat::kGray, 0.0, std::nullopt, camera);
-  source.process(fixtureFrames()[1], PixelFormat::kGray, 0.5);  // one without
-  saveDetector(source, path("map.mild"));
-  const DetectorState state = readDetectorFile(path("map.mild"));
+  processImage(source, fixtureFrames()[0], PixelFormat::kGray, 0.0, std::nullopt, camera);
+  processImage(source, fixtureFrames()[1], PixelFormat::kGray, 0.5);  // one without
+  saveMap(source.map(), path("map.mild"));
+  const MapState state = readMapFile(path("map.mild"));
   ASSERT_EQ(state.records.size(), 2u);
   EXPECT_EQ(state.records[0].camera, camera);
   EXPECT_FALSE(state.records[1].camera.known());
@@ -198,7 +199,7 @@ TEST_F(DatabaseFile, EachKeyframesCameraIsKept) {
 TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
   LoopDetector source(fixtureParams());
   process(source, 0, 4);
-  saveDetector(source, path("map.mild"));
+  saveMap(source.map(), path("map.mild"));
   const std::vector<uint8_t> v3 = bytes(path("map.mild"));
   std::vector<uint8_t> payload(v3.begin() + 32, v3.end());
   size_t at = 0;
@@ -228,39 +229,39 @@ TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
   write(path("v2.mild"), v2);
 
   LoopDetector loaded(fixtureParams());
-  loadDetector(loaded, path("v2.mild"), true);
-  ASSERT_EQ(loaded.size(), 4u);
+  loadMap(loaded.map(), path("v2.mild"), true);
+  ASSERT_EQ(loaded.map().size(), 4u);
   for (KeyframeIndex k = 0; k < 4; ++k) {
-    EXPECT_EQ(loaded.record(k).id, source.record(k).id);
-    EXPECT_EQ(loaded.record(k).keypoints.size(), source.record(k).keypoints.size());
-    EXPECT_FALSE(loaded.record(k).camera.known());
+    EXPECT_EQ(loaded.map().record(k).id, source.map().record(k).id);
+    EXPECT_EQ(loaded.map().record(k).keypoints.size(), source.map().record(k).keypoints.size());
+    EXPECT_FALSE(loaded.map().record(k).camera.known());
   }
-  EXPECT_EQ(loaded.process(fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity,
-            source.process(fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity);
+  EXPECT_EQ(processImage(loaded, fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity,
+            processImage(source, fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity);
 }
 
 TEST_F(DatabaseFile, OtherIndexParametersRebuildTheIndexAndSaySo) {
   LoopDetector source(fixtureParams());
   process(source, 0, 20);
-  saveDetector(source, path("map.mild"));
+  saveMap(source.map(), path("map.mild"));
   DetectorParams other = fixtureParams();
   other.database.index.num_tables = 22;
   LoopDetector loaded(other);
-  const LoadReport report = loadDetector(loaded, path("map.mild"), true);
+  const LoadReport report = loadMap(loaded.map(), path("map.mild"), true);
   EXPECT_NE(report.message.find("index/num_tables 0 -> 22"), std::string::npos) << report.message;
   // The same as building the 22-table detector from the same features.
   LoopDetector fresh(other);
   process(fresh, 0, 20);
-  EXPECT_EQ(loaded.database().index().entryCount(), fresh.database().index().entryCount());
-  EXPECT_EQ(loaded.process(fixtureFrames()[50], PixelFormat::kGray, 25.0).similarity,
-            fresh.process(fixtureFrames()[50], PixelFormat::kGray, 25.0).similarity);
+  EXPECT_EQ(loaded.map().database().index().entryCount(), fresh.map().database().index().entryCount());
+  EXPECT_EQ(processImage(loaded, fixtureFrames()[50], PixelFormat::kGray, 25.0).similarity,
+            processImage(fresh, fixtureFrames()[50], PixelFormat::kGray, 25.0).similarity);
 }
 
 TEST_F(DatabaseFile, SavingIntoAMissingFolderFailsAndKeepsNothingHalfWritten) {
   LoopDetector source(fixtureParams());
   process(source, 0, 3);
-  EXPECT_THROW(saveDetector(source, path("no/such/folder/map.mild")), IoError);
-  saveDetector(source, path("map.mild"));
+  EXPECT_THROW(saveMap(source.map(), path("no/such/folder/map.mild")), IoError);
+  saveMap(source.map(), path("map.mild"));
   size_t files = 0;
   for (const auto& e : fs::directory_iterator(dir_)) files += e.is_regular_file() ? 1 : 0;
   EXPECT_EQ(files, 1u) << "no temporary file left behind";
@@ -274,12 +275,12 @@ TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
   process(small, 0, 5);
   process(large, 0, 60);
   const std::string target = path("map.mild");
-  saveDetector(small, target);
+  saveMap(small.map(), target);
 
   // Kill moments spread over a few save cycles, however fast this build saves (sanitizers slow it).
   const auto start = std::chrono::steady_clock::now();
-  saveDetector(large, path("timing.mild"));
-  saveDetector(small, path("timing.mild"));
+  saveMap(large.map(), path("timing.mild"));
+  saveMap(small.map(), path("timing.mild"));
   fs::remove(path("timing.mild"));
   const int cycle_us = static_cast<int>(
       std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::steady_clock::now() - start).count());
@@ -296,9 +297,9 @@ TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
       close(done[0]);
       const char tick = 1;
       for (;;) {
-        saveDetector(large, target);
+        saveMap(large.map(), target);
         if (::write(done[1], &tick, 1) != 1) _exit(1);
-        saveDetector(small, target);
+        saveMap(small.map(), target);
       }
     }
     close(done[1]);
@@ -308,11 +309,11 @@ TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
     kill(child, SIGKILL);
     waitpid(child, nullptr, 0);
     close(done[0]);
-    const DetectorState state = readDetectorFile(target);  // throws if torn
+    const MapState state = readMapFile(target);  // throws if torn
     ASSERT_TRUE(state.records.size() == 5 || state.records.size() == 60) << state.records.size();
     (state.records.size() == 5 ? saw_small : saw_large)++;
     LoopDetector check(fixtureParams());
-    EXPECT_NO_THROW(loadDetector(check, target, true));
+    EXPECT_NO_THROW(loadMap(check.map(), target, true));
   }
   for (const auto& e : fs::directory_iterator(dir_)) {
     if (e.path().string().find(".tmp.") != std::string::npos) fs::remove(e.path());  // a killed writer's leftovers

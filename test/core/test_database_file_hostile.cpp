@@ -44,7 +44,7 @@ std::unique_ptr<LoopDetector> detectorWith(size_t keyframes, uint64_t first_id =
       f.descriptors.push_back(test::randomDescriptor(rng));
       f.keypoints.emplace_back(static_cast<float>(i), static_cast<float>(k), 7.0f);
     }
-    d->process(std::move(f), static_cast<double>(k), first_id + k);
+    d->process(Observation::ofFeatures(std::move(f), static_cast<double>(k), first_id + k));
   }
   return d;
 }
@@ -93,7 +93,7 @@ TEST_F(HostileFiles, AFifoIsRefusedWithoutBlocking) {
   const std::string fifo = path("map.mild");
   EXPECT_TRUE(inChildWithin(10.0, [&] {
     try {
-      readDetectorFile(fifo);
+      readMapFile(fifo);
     } catch (const InvalidInput& e) {
       return std::string(e.what()).find("a FIFO") != std::string::npos ? 0 : 1;
     } catch (...) {
@@ -105,7 +105,7 @@ TEST_F(HostileFiles, AFifoIsRefusedWithoutBlocking) {
 TEST_F(HostileFiles, AFolderIsRefusedAsInput) {
   fs::create_directories(path("map.mild"));
   try {
-    readDetectorFile(path("map.mild"));
+    readMapFile(path("map.mild"));
     FAIL() << "read a folder";
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("a folder"), std::string::npos) << e.what();
@@ -114,12 +114,12 @@ TEST_F(HostileFiles, AFolderIsRefusedAsInput) {
 
 TEST_F(HostileFiles, ASymbolicLinkIsNeitherReadNorWrittenThrough) {
   auto detector = detectorWith(3);
-  saveDetector(*detector, path("real.mild"));
+  saveMap(detector->map(), path("real.mild"));
   std::ofstream(path("victim.txt")) << "precious";
   fs::create_symlink(path("real.mild"), path("link.mild"));
-  EXPECT_THROW(readDetectorFile(path("link.mild")), InvalidInput);
+  EXPECT_THROW(readMapFile(path("link.mild")), InvalidInput);
   fs::create_symlink(path("victim.txt"), path("to_victim.mild"));
-  EXPECT_THROW(saveDetector(*detector, path("to_victim.mild")), InvalidInput);
+  EXPECT_THROW(saveMap(detector->map(), path("to_victim.mild")), InvalidInput);
   EXPECT_EQ(contents(path("victim.txt")), "precious");
   EXPECT_TRUE(fs::is_symlink(path("to_victim.mild"))) << "the link itself is left alone too";
 }
@@ -127,10 +127,10 @@ TEST_F(HostileFiles, ASymbolicLinkIsNeitherReadNorWrittenThrough) {
 TEST_F(HostileFiles, AFolderOrDeviceAtTheTargetIsNotReplaced) {
   auto detector = detectorWith(3);
   fs::create_directories(path("folder.mild"));
-  EXPECT_THROW(saveDetector(*detector, path("folder.mild")), InvalidInput);
+  EXPECT_THROW(saveMap(detector->map(), path("folder.mild")), InvalidInput);
   EXPECT_TRUE(fs::is_directory(path("folder.mild")));
   if (mknod(path("null.mild").c_str(), S_IFCHR | 0600, makedev(1, 3)) == 0) {  // /dev/null's numbers (needs root)
-    EXPECT_THROW(saveDetector(*detector, path("null.mild")), InvalidInput);
+    EXPECT_THROW(saveMap(detector->map(), path("null.mild")), InvalidInput);
     EXPECT_TRUE(fs::is_character_file(path("null.mild")));
   }
 }
@@ -147,7 +147,7 @@ TEST_F(HostileFiles, AHugeFileIsJudgedByItsHeaderNotReadWhole) {
     setrlimit(RLIMIT_AS, &limit);
 #endif
     try {
-      readDetectorFile(huge);
+      readMapFile(huge);
     } catch (const InvalidInput& e) {
       return std::string(e.what()).find("not a mild_lcd database") != std::string::npos ? 0 : 1;
     } catch (...) {
@@ -159,16 +159,16 @@ TEST_F(HostileFiles, AHugeFileIsJudgedByItsHeaderNotReadWhole) {
 // A real database over the size bound is refused unread, as a capacity problem.
 TEST_F(HostileFiles, AFileOverTheSizeBoundIsRefusedUnread) {
   auto detector = detectorWith(40);
-  saveDetector(*detector, path("map.mild"));
+  saveMap(detector->map(), path("map.mild"));
   const auto size = fs::file_size(path("map.mild"));
   ASSERT_GT(size, 64u << 10);
   try {
-    readDetectorFile(path("map.mild"), 64u << 10);
+    readMapFile(path("map.mild"), 64u << 10);
     FAIL() << "read a file over the bound";
   } catch (const CapacityError& e) {
     EXPECT_NE(std::string(e.what()).find("allowed"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(readDetectorFile(path("map.mild"), size).records.size(), 40u) << "at the bound it loads";
+  EXPECT_EQ(readMapFile(path("map.mild"), size).records.size(), 40u) << "at the bound it loads";
 }
 
 // Two detectors (as two nodelets in one manager) saving to one path at once, 20 times: every save
@@ -181,14 +181,14 @@ TEST_F(HostileFiles, ConcurrentSavesToOnePathNeverCorruptEachOther) {
     std::atomic<int> failures{0};
     std::thread a([&] {
       try {
-        saveDetector(*small, target);
+        saveMap(small->map(), target);
       } catch (...) {
         ++failures;
       }
     });
     std::thread b([&] {
       try {
-        saveDetector(*large, target);
+        saveMap(large->map(), target);
       } catch (...) {
         ++failures;
       }
@@ -196,7 +196,7 @@ TEST_F(HostileFiles, ConcurrentSavesToOnePathNeverCorruptEachOther) {
     a.join();
     b.join();
     EXPECT_EQ(failures.load(), 0) << "round " << round;
-    const DetectorState state = readDetectorFile(target);
+    const MapState state = readMapFile(target);
     const size_t n = state.records.size();
     ASSERT_TRUE(n == 5 || n == 60) << "round " << round << ": " << n << " keyframes";
     EXPECT_EQ(state.records.front().id, n == 5 ? 0u : 1000u) << "one detector's file, whole";
@@ -214,12 +214,12 @@ TEST_F(HostileFiles, TemporaryFilesOfKilledSavesAreRemovedByTheNextSave) {
   age(locked, 3600);
   const int held = open(locked.c_str(), O_RDONLY);
   ASSERT_EQ(flock(held, LOCK_EX), 0);  // a save in progress elsewhere holds its lock
-  saveDetector(*detector, target);
+  saveMap(detector->map(), target);
   EXPECT_FALSE(fs::exists(stale)) << "abandoned an hour ago, unlocked: removed";
   EXPECT_TRUE(fs::exists(fresh)) << "seconds old: may belong to a save that has not locked it yet";
   EXPECT_TRUE(fs::exists(locked)) << "locked: a save in progress";
   close(held);
-  EXPECT_EQ(readDetectorFile(target).records.size(), 3u);
+  EXPECT_EQ(readMapFile(target).records.size(), 3u);
 }
 
 // A link planted under a temporary name (a guess at the next one, or an old one's) is not followed:
@@ -231,10 +231,10 @@ TEST_F(HostileFiles, LinksPlantedAtTemporaryNamesAreNotFollowed) {
   const std::string planted = target + ".tmp.12345678";
   fs::create_symlink(path("victim.txt"), planted);
   age(planted, 3600);
-  for (int i = 0; i < 5; ++i) saveDetector(*detector, target);
+  for (int i = 0; i < 5; ++i) saveMap(detector->map(), target);
   EXPECT_EQ(contents(path("victim.txt")), "precious");
   EXPECT_TRUE(fs::is_symlink(planted));
-  EXPECT_EQ(readDetectorFile(target).records.size(), 3u);
+  EXPECT_EQ(readMapFile(target).records.size(), 3u);
 }
 
 }  // namespace

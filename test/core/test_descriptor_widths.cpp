@@ -12,6 +12,7 @@
 #include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "random_descriptors.hpp"
@@ -43,7 +44,7 @@ FixtureRun runFixture(LoopDetector& detector) {
   FixtureRun run;
   std::vector<ScoredPair> reported;
   for (size_t i = 0; i < fixtureFrames().size(); ++i) {
-    const DetectionResult r = detector.process(fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
+    const DetectionResult r = processImage(detector, fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
     for (const LoopCandidate& c : r.candidates) {
       if (!c.verification.verified) continue;
       reported.push_back({static_cast<int>(i), static_cast<int>(c.id), c.probability});
@@ -62,7 +63,7 @@ class DescriptorWidths : public ::testing::TestWithParam<std::pair<const char*, 
 TEST_P(DescriptorWidths, ThePipelineFindsTheFixtureLoop) {
   const auto [type, bytes] = GetParam();
   LoopDetector detector(paramsFor(type));
-  ASSERT_EQ(detector.descriptorBytes(), bytes);
+  ASSERT_EQ(detector.map().descriptorBytes(), bytes);
   const FixtureRun run = runFixture(detector);
   EXPECT_TRUE(run.accepted_false.empty()) << type << ": " << run.accepted_false.size() << " wrong accepted loops";
   // 13 loop queries (47-59); ORB finds 6 or more (test_loop_detector).
@@ -70,11 +71,11 @@ TEST_P(DescriptorWidths, ThePipelineFindsTheFixtureLoop) {
   EXPECT_GE(run.metrics.recall_at_100_precision, 0.3) << type;
   RecordProperty(std::string(type) + "_recall_at_100p", std::to_string(run.metrics.recall_at_100_precision));
   // Every stored descriptor has the width, and the index cut it into 16-bit (or 15-16) tables.
-  for (KeyframeIndex k = 0; k < detector.size(); ++k) {
-    for (const Descriptor& d : detector.database().descriptors(k)) ASSERT_EQ(d.bytes, bytes);
+  for (KeyframeIndex k = 0; k < detector.map().size(); ++k) {
+    for (const Descriptor& d : detector.map().database().descriptors(k)) ASSERT_EQ(d.bytes, bytes);
   }
-  EXPECT_EQ(detector.database().index().layout().bits(), bytes * 8);
-  EXPECT_EQ(detector.database().index().layout().count(), (bytes * 8 + 15) / 16);
+  EXPECT_EQ(detector.map().database().index().layout().bits(), bytes * 8);
+  EXPECT_EQ(detector.map().database().index().layout().count(), (bytes * 8 + 15) / 16);
 }
 
 INSTANTIATE_TEST_SUITE_P(Extractors, DescriptorWidths,
@@ -88,63 +89,63 @@ class MapFiles : public mild::test::ScratchFolderTest {
 
 TEST_F(MapFiles, RecordTheWidthAndAreRefusedByADetectorOfAnother) {
   LoopDetector brisk(paramsFor("brisk"));
-  for (size_t i = 0; i < 20; ++i) brisk.process(fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
-  saveDetector(brisk, path("brisk.mild"));
-  EXPECT_EQ(readDetectorFile(path("brisk.mild")).descriptor_bytes, 64);
+  for (size_t i = 0; i < 20; ++i) processImage(brisk, fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
+  saveMap(brisk.map(), path("brisk.mild"));
+  EXPECT_EQ(readMapFile(path("brisk.mild")).descriptor_bytes, 64);
 
   // Resumed by a BRISK detector: the same answer to the next frame as the one that never stopped.
   LoopDetector resumed(paramsFor("brisk"));
-  loadDetector(resumed, path("brisk.mild"), true);
-  EXPECT_EQ(resumed.process(fixtureFrames()[20], PixelFormat::kGray, 10.0).similarity,
-            brisk.process(fixtureFrames()[20], PixelFormat::kGray, 10.0).similarity);
+  loadMap(resumed.map(), path("brisk.mild"), true);
+  EXPECT_EQ(processImage(resumed, fixtureFrames()[20], PixelFormat::kGray, 10.0).similarity,
+            processImage(brisk, fixtureFrames()[20], PixelFormat::kGray, 10.0).similarity);
 
   // An ORB detector refuses it, naming both widths, and stays as it was (also for a merge).
   LoopDetector orb(paramsFor("orb"));
-  orb.process(fixtureFrames()[0], PixelFormat::kGray, 0.0);
+  processImage(orb, fixtureFrames()[0], PixelFormat::kGray, 0.0);
   for (bool merge : {false, true}) {
     try {
       if (merge) {
-        mergeDetector(orb, path("brisk.mild"));
+        mergeMap(orb.map(), path("brisk.mild"));
       } else {
-        loadDetector(orb, path("brisk.mild"), false);
+        loadMap(orb.map(), path("brisk.mild"), false);
       }
       ADD_FAILURE() << "a 64-byte map was loaded into a 32-byte detector";
     } catch (const InvalidInput& e) {
       EXPECT_NE(std::string(e.what()).find("64-byte"), std::string::npos) << e.what();
       EXPECT_NE(std::string(e.what()).find("32-byte"), std::string::npos) << e.what();
     }
-    EXPECT_EQ(orb.size(), 1u);
+    EXPECT_EQ(orb.map().size(), 1u);
   }
 }
 
 TEST(KeyframeWidths, AKeyframeOfAnotherWidthIsRefusedAndChangesNothing) {
   LoopDetector brisk(paramsFor("brisk"));
-  brisk.process(fixtureFrames()[0], PixelFormat::kGray, 0.0);
+  processImage(brisk, fixtureFrames()[0], PixelFormat::kGray, 0.0);
   std::mt19937_64 rng(4);
   Features orb_features;
   orb_features.descriptors = test::randomDescriptors(50, rng, 32);
   orb_features.keypoints.assign(50, cv::KeyPoint(10.0f, 10.0f, 7.0f));
   try {
-    brisk.process(orb_features, 1.0);
+    brisk.process(Observation::ofFeatures(orb_features, 1.0));
     FAIL() << "32-byte descriptors entered a 64-byte database";
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("32 bytes wide; this database holds 64-byte"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(brisk.size(), 1u);
-  EXPECT_EQ(brisk.nextId(), 1u);
+  EXPECT_EQ(brisk.map().size(), 1u);
+  EXPECT_EQ(brisk.map().nextId(), 1u);
   // Mixed widths within one keyframe are refused as well.
   Features mixed;
   mixed.descriptors = test::randomDescriptors(3, rng, 64);
   mixed.descriptors.push_back(test::randomDescriptor(rng, 32));
   mixed.keypoints.assign(4, cv::KeyPoint(10.0f, 10.0f, 7.0f));
-  EXPECT_THROW(brisk.process(mixed, 1.0), InvalidInput);
-  EXPECT_EQ(brisk.size(), 1u);
+  EXPECT_THROW(brisk.process(Observation::ofFeatures(mixed, 1.0)), InvalidInput);
+  EXPECT_EQ(brisk.map().size(), 1u);
   // The right width goes in.
   Features wide;
   wide.descriptors = test::randomDescriptors(50, rng, 64);
   wide.keypoints.assign(50, cv::KeyPoint(10.0f, 10.0f, 7.0f));
-  EXPECT_NO_THROW(brisk.process(wide, 1.0));
-  EXPECT_EQ(brisk.size(), 2u);
+  EXPECT_NO_THROW(brisk.process(Observation::ofFeatures(wide, 1.0)));
+  EXPECT_EQ(brisk.map().size(), 2u);
 }
 
 // A keyframe without descriptors has no descriptor to judge: it is judged on the width its sender
@@ -154,45 +155,46 @@ TEST(KeyframeWidths, AnEmptyKeyframeIsJudgedOnTheWidthItDeclares) {
   Features empty;
   empty.declared_bytes = 64;
   try {
-    orb.process(empty, 1.0);
+    orb.process(Observation::ofFeatures(empty, 1.0));
     FAIL() << "an empty 64-byte keyframe entered a 32-byte database";
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("64 bytes wide; this database holds 32-byte"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(orb.size(), 0u);
-  EXPECT_EQ(orb.nextId(), 0u);
+  EXPECT_EQ(orb.map().size(), 0u);
+  EXPECT_EQ(orb.map().nextId(), 0u);
   empty.declared_bytes = 32;
-  EXPECT_NO_THROW(orb.process(empty, 2.0)) << "an empty keyframe of the right width is a keyframe";
+  EXPECT_NO_THROW(orb.process(Observation::ofFeatures(empty, 2.0)))
+      << "an empty keyframe of the right width is a keyframe";
   empty.declared_bytes = 0;
-  EXPECT_NO_THROW(orb.process(empty, 3.0)) << "nothing declared: nothing to judge";
+  EXPECT_NO_THROW(orb.process(Observation::ofFeatures(empty, 3.0))) << "nothing declared: nothing to judge";
   std::mt19937_64 rng(5);
   Features declared_wrong;  // 32-byte descriptors declared as 64
   declared_wrong.descriptors = test::randomDescriptors(5, rng, 32);
   declared_wrong.keypoints.assign(5, cv::KeyPoint(10.0f, 10.0f, 7.0f));
   declared_wrong.declared_bytes = 64;
-  EXPECT_THROW(orb.process(declared_wrong, 4.0), InvalidInput);
-  EXPECT_EQ(orb.size(), 2u);
+  EXPECT_THROW(orb.process(Observation::ofFeatures(declared_wrong, 4.0)), InvalidInput);
+  EXPECT_EQ(orb.map().size(), 2u);
 }
 
 TEST(KeyframeWidths, ADatabaseOfAFrontEndsOwnWidthTakesKeyframesButRefusesImages) {
   DetectorParams p = paramsFor("orb");
   p.features.descriptor_bytes = 16;  // BRIEF-16 from a front-end
   LoopDetector detector(p);
-  EXPECT_EQ(detector.descriptorBytes(), 16);
+  EXPECT_EQ(detector.map().descriptorBytes(), 16);
   std::mt19937_64 rng(8);
   for (int k = 0; k < 3; ++k) {
     Features f;
     f.descriptors = test::randomDescriptors(40, rng, 16);
     f.keypoints.assign(40, cv::KeyPoint(10.0f, 10.0f, 7.0f));
-    EXPECT_NO_THROW(detector.process(f, 1.0 * k));
+    EXPECT_NO_THROW(detector.process(Observation::ofFeatures(f, 1.0 * k)));
   }
   try {
-    detector.process(fixtureFrames()[0], PixelFormat::kGray, 5.0);
+    processImage(detector, fixtureFrames()[0], PixelFormat::kGray, 5.0);
     FAIL() << "an ORB image went into a 16-byte database";
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("give it Keyframes"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(detector.size(), 3u);
+  EXPECT_EQ(detector.map().size(), 3u);
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include "fixture_params.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "test_images.hpp"
 
@@ -39,7 +40,7 @@ TEST(LoopDetector, FindsTheFixtureLoopWithoutFalsePositives) {
   std::vector<ScoredPair> reported;
   std::set<int> detected_queries;
   for (size_t i = 0; i < frames.size(); ++i) {
-    const DetectionResult r = detector.process(frames[i], PixelFormat::kGray, 0.5 * i, i);
+    const DetectionResult r = processImage(detector, frames[i], PixelFormat::kGray, 0.5 * i, i);
     EXPECT_EQ(r.query_id, i);
     for (const LoopCandidate& c : r.candidates) {
       reported.push_back({static_cast<int>(i), static_cast<int>(c.id), c.probability});
@@ -64,10 +65,10 @@ TEST(LoopDetector, GreyBgrAndRgbInputGiveTheSameResult) {
     cv::Mat colour, colour4;
     cv::cvtColor(frames[i], colour, cv::COLOR_GRAY2BGR);
     cv::cvtColor(frames[i], colour4, cv::COLOR_GRAY2BGRA);
-    const auto a = grey.process(frames[i], PixelFormat::kGray, i);
-    const auto b = bgr.process(colour, PixelFormat::kBgr, i);
-    const auto c = rgb.process(colour, PixelFormat::kRgb, i);
-    const auto d = bgra.process(colour4, PixelFormat::kBgra, i);
+    const auto a = processImage(grey, frames[i], PixelFormat::kGray, i);
+    const auto b = processImage(bgr, colour, PixelFormat::kBgr, i);
+    const auto c = processImage(rgb, colour, PixelFormat::kRgb, i);
+    const auto d = processImage(bgra, colour4, PixelFormat::kBgra, i);
     EXPECT_EQ(a.stats.features, b.stats.features);
     EXPECT_EQ(a.similarity, b.similarity);
     EXPECT_EQ(a.similarity, c.similarity);
@@ -78,52 +79,52 @@ TEST(LoopDetector, GreyBgrAndRgbInputGiveTheSameResult) {
 TEST(LoopDetector, RejectsUnusableImagesAndKeepsTheDatabase) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());
-  detector.process(frames[0], PixelFormat::kGray, 0.0);
-  const size_t features = detector.database().featureCount();
+  processImage(detector, frames[0], PixelFormat::kGray, 0.0);
+  const size_t features = detector.map().database().featureCount();
   const cv::Mat empty;
   const cv::Mat deep(240, 320, CV_16UC1, cv::Scalar(1000));
   const cv::Mat floats(240, 320, CV_32FC1, cv::Scalar(0.5));
   cv::Mat colour;
   cv::cvtColor(frames[1], colour, cv::COLOR_GRAY2BGR);
-  EXPECT_THROW(detector.process(empty, PixelFormat::kGray, 1.0), InvalidInput);
-  EXPECT_THROW(detector.process(deep, PixelFormat::kGray, 1.0), InvalidInput);
-  EXPECT_THROW(detector.process(floats, PixelFormat::kGray, 1.0), InvalidInput);
-  EXPECT_THROW(detector.process(colour, PixelFormat::kGray, 1.0), InvalidInput);    // 3 channels called grey
-  EXPECT_THROW(detector.process(frames[1], PixelFormat::kRgb, 1.0), InvalidInput);  // 1 channel called RGB
-  EXPECT_EQ(detector.size(), 1u);
-  EXPECT_EQ(detector.database().featureCount(), features);
+  EXPECT_THROW(processImage(detector, empty, PixelFormat::kGray, 1.0), InvalidInput);
+  EXPECT_THROW(processImage(detector, deep, PixelFormat::kGray, 1.0), InvalidInput);
+  EXPECT_THROW(processImage(detector, floats, PixelFormat::kGray, 1.0), InvalidInput);
+  EXPECT_THROW(processImage(detector, colour, PixelFormat::kGray, 1.0), InvalidInput);    // 3 channels called grey
+  EXPECT_THROW(processImage(detector, frames[1], PixelFormat::kRgb, 1.0), InvalidInput);  // 1 channel called RGB
+  EXPECT_EQ(detector.map().size(), 1u);
+  EXPECT_EQ(detector.map().database().featureCount(), features);
   // Still working afterwards.
-  EXPECT_EQ(detector.process(frames[1], PixelFormat::kGray, 1.0).query_index, 1u);
+  EXPECT_EQ(processImage(detector, frames[1], PixelFormat::kGray, 1.0).query_index, 1u);
 }
 
 TEST(LoopDetector, TinyAndFeaturelessImagesAreKeyframesWithoutFeatures) {
   LoopDetector detector(fixtureParams());
-  const auto r = detector.process(cv::Mat(8, 8, CV_8UC1, cv::Scalar(7)), PixelFormat::kGray, 0.0);
+  const auto r = processImage(detector, cv::Mat(8, 8, CV_8UC1, cv::Scalar(7)), PixelFormat::kGray, 0.0);
   EXPECT_EQ(r.stats.features, 0u);
-  EXPECT_EQ(detector.size(), 1u);
-  detector.process(cv::Mat(480, 640, CV_8UC1, cv::Scalar(0)), PixelFormat::kGray, 1.0);
-  EXPECT_EQ(detector.size(), 2u);
+  EXPECT_EQ(detector.map().size(), 1u);
+  processImage(detector, cv::Mat(480, 640, CV_8UC1, cv::Scalar(0)), PixelFormat::kGray, 1.0);
+  EXPECT_EQ(detector.map().size(), 2u);
   // One or two pixels thin (OpenCV's ORB pyramid would fail on them; found by fuzzing).
   cv::Mat stripes(96, 2, CV_8UC1);
   cv::randu(stripes, 0, 256);
   for (const cv::Mat& thin : {stripes, cv::Mat(stripes.t()), cv::Mat(stripes.col(0))}) {
-    EXPECT_EQ(detector.process(thin, PixelFormat::kGray, 2.0).stats.features, 0u);
+    EXPECT_EQ(processImage(detector, thin, PixelFormat::kGray, 2.0).stats.features, 0u);
   }
-  EXPECT_EQ(detector.size(), 5u);
+  EXPECT_EQ(detector.map().size(), 5u);
 }
 
 TEST(LoopDetector, KeepsGivenIdsAndAssignsTheNextFreeOne) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());
-  EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
-  EXPECT_EQ(detector.process(frames[1], PixelFormat::kGray, 1.0, 1000).query_id, 1000u);
-  EXPECT_EQ(detector.process(frames[2], PixelFormat::kGray, 2.0).query_id, 1001u);
-  EXPECT_THROW(detector.process(frames[3], PixelFormat::kGray, 3.0, 1000), InvalidInput);
-  EXPECT_EQ(detector.size(), 3u);
-  ASSERT_TRUE(detector.find(1000));
-  EXPECT_EQ(*detector.find(1000), 1u);
-  EXPECT_FALSE(detector.find(5));
-  EXPECT_EQ(detector.record(2).id, 1001u);
+  EXPECT_EQ(processImage(detector, frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
+  EXPECT_EQ(processImage(detector, frames[1], PixelFormat::kGray, 1.0, 1000).query_id, 1000u);
+  EXPECT_EQ(processImage(detector, frames[2], PixelFormat::kGray, 2.0).query_id, 1001u);
+  EXPECT_THROW(processImage(detector, frames[3], PixelFormat::kGray, 3.0, 1000), InvalidInput);
+  EXPECT_EQ(detector.map().size(), 3u);
+  ASSERT_TRUE(detector.map().find(1000));
+  EXPECT_EQ(*detector.map().find(1000), 1u);
+  EXPECT_FALSE(detector.map().find(5));
+  EXPECT_EQ(detector.map().record(2).id, 1001u);
 }
 
 // An id the database could not continue from (next id = largest + 1) is refused at input, so a
@@ -131,14 +132,14 @@ TEST(LoopDetector, KeepsGivenIdsAndAssignsTheNextFreeOne) {
 TEST(LoopDetector, IdsItCannotContinueFromAreRefusedAtInput) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());
-  EXPECT_THROW(detector.process(frames[0], PixelFormat::kGray, 0.0, UINT64_MAX), InvalidInput);
-  EXPECT_EQ(detector.size(), 0u);
-  EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0, kMaxKeyframeId).query_id, kMaxKeyframeId);
-  EXPECT_THROW(detector.process(frames[1], PixelFormat::kGray, 1.0), CapacityError) << "no id left to assign";
-  EXPECT_EQ(detector.process(frames[1], PixelFormat::kGray, 1.0, 7).query_id, 7u) << "given ids still work";
-  EXPECT_EQ(detector.size(), 2u);
-  EXPECT_THROW(detector.process(frames[2], PixelFormat::kGray, std::nan(""), 8), InvalidInput);
-  EXPECT_EQ(detector.size(), 2u);
+  EXPECT_THROW(processImage(detector, frames[0], PixelFormat::kGray, 0.0, UINT64_MAX), InvalidInput);
+  EXPECT_EQ(detector.map().size(), 0u);
+  EXPECT_EQ(processImage(detector, frames[0], PixelFormat::kGray, 0.0, kMaxKeyframeId).query_id, kMaxKeyframeId);
+  EXPECT_THROW(processImage(detector, frames[1], PixelFormat::kGray, 1.0), CapacityError) << "no id left to assign";
+  EXPECT_EQ(processImage(detector, frames[1], PixelFormat::kGray, 1.0, 7).query_id, 7u) << "given ids still work";
+  EXPECT_EQ(detector.map().size(), 2u);
+  EXPECT_THROW(processImage(detector, frames[2], PixelFormat::kGray, std::nan(""), 8), InvalidInput);
+  EXPECT_EQ(detector.map().size(), 2u);
 }
 
 // OpenCV's ORB keeps every keypoint tied with the weakest it retains: on a tiled texture that was
@@ -151,15 +152,15 @@ TEST(LoopDetector, ATiledTextureYieldsAtMostNumFeatures) {
   DetectorParams p = fixtureParams();
   p.features.section<OrbParams>().num_features = 800;
   LoopDetector detector(p);
-  const DetectionResult r = detector.process(tiled, PixelFormat::kGray, 0.0);
+  const DetectionResult r = processImage(detector, tiled, PixelFormat::kGray, 0.0);
   const size_t budget = featureBudget(800, tiled.total(), p.features.reference_pixels);
   EXPECT_EQ(budget, 1848u);
   EXPECT_LE(r.stats.features, budget);
   EXPECT_GT(r.stats.features, budget / 2) << "the cap keeps the strongest, not fewer";
   // Deterministic: the same image keeps the same features.
   LoopDetector again(p);
-  EXPECT_EQ(again.process(tiled, PixelFormat::kGray, 0.0).stats.features, r.stats.features);
-  EXPECT_EQ(again.features(0).descriptors, detector.features(0).descriptors);
+  EXPECT_EQ(processImage(again, tiled, PixelFormat::kGray, 0.0).stats.features, r.stats.features);
+  EXPECT_EQ(again.map().features(0).descriptors, detector.map().features(0).descriptors);
 }
 
 TEST(LoopDetector, ExcludesRecentKeyframesByCountAndByTime) {
@@ -172,9 +173,9 @@ TEST(LoopDetector, ExcludesRecentKeyframesByCountAndByTime) {
   p.candidates.exclusion_seconds = 2.0;
   LoopDetector by_time(p);
   for (size_t i = 0; i < 12; ++i) {
-    const auto a = by_count.process(frames[i], PixelFormat::kGray, 0.5 * i);
+    const auto a = processImage(by_count, frames[i], PixelFormat::kGray, 0.5 * i);
     EXPECT_EQ(a.similarity.size(), i >= 5 ? i - 4 : 0u);  // keyframes 0 .. i-5
-    const auto b = by_time.process(frames[i], PixelFormat::kGray, 0.5 * i);
+    const auto b = processImage(by_time, frames[i], PixelFormat::kGray, 0.5 * i);
     // Stamps 0.5 s apart: keyframes at least 2 s older are the first i-3.
     EXPECT_EQ(b.similarity.size(), i >= 4 ? i - 3 : 0u);
     for (const auto& c : a.candidates) EXPECT_LE(c.index + 5, i);
@@ -186,8 +187,8 @@ TEST(LoopDetector, RejectsFeaturesWhoseCountsDisagree) {
   Features f;
   f.keypoints.resize(3);
   f.descriptors.resize(2);
-  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
-  EXPECT_EQ(detector.size(), 0u);
+  EXPECT_THROW(detector.process(Observation::ofFeatures(f, 0.0)), InvalidInput);
+  EXPECT_EQ(detector.map().size(), 0u);
 }
 
 // The verification seam: whatever verifier is installed sees the query's and each candidate's
@@ -216,7 +217,7 @@ TEST(LoopDetector, RunsTheInstalledVerifierOnEveryCandidate) {
   detector.setVerifier(std::move(verifier));
   size_t candidates = 0, judged = 0;
   for (size_t i = 0; i < 20; ++i) {
-    const auto r = detector.process(frames[i], PixelFormat::kGray, i);
+    const auto r = processImage(detector, frames[i], PixelFormat::kGray, i);
     for (const auto& c : r.candidates) {
       EXPECT_TRUE(c.verification.verified);
       EXPECT_EQ(c.verification.inliers, 42);
@@ -248,7 +249,7 @@ TEST(LoopDetector, AVerifierThatLosesACandidateIsAnErrorNotAShortList) {
   bool thrown = false;
   for (size_t i = 0; i < 20 && !thrown; ++i) {
     try {
-      detector.process(frames[i], PixelFormat::kGray, i);
+      processImage(detector, frames[i], PixelFormat::kGray, i);
     } catch (const std::logic_error& e) {
       thrown = true;
       EXPECT_NE(std::string(e.what()).find("verifications for"), std::string::npos) << e.what();
@@ -268,8 +269,8 @@ TEST(LoopDetector, StoppingVerificationEarlyKeepsEveryKeyframesBestCandidateAndW
   size_t skipped = 0, candidates = 0, accepted = 0;
   for (size_t i = 0; i < frames.size(); ++i) {
     SCOPED_TRACE("keyframe " + std::to_string(i));
-    const DetectionResult a = reference.process(frames[i], PixelFormat::kGray, 0.5 * i, i);
-    const DetectionResult b = detector.process(frames[i], PixelFormat::kGray, 0.5 * i, i);
+    const DetectionResult a = processImage(reference, frames[i], PixelFormat::kGray, 0.5 * i, i);
+    const DetectionResult b = processImage(detector, frames[i], PixelFormat::kGray, 0.5 * i, i);
     ASSERT_EQ(a.candidates.size(), b.candidates.size());
     if (a.candidates.empty()) continue;
     EXPECT_EQ(a.candidates.front().id, b.candidates.front().id);
@@ -306,10 +307,10 @@ TEST(LoopDetector, ReportsARevisitAtTheFirstEligibleKeyframe) {
   for (size_t f = 100; f <= 130; f += 5) keyframes.push_back(f);
   ASSERT_EQ(keyframes.size(), 8u);
   for (size_t i = 0; i < keyframes.size(); ++i) {
-    const DetectionResult r = detector.process(frames[keyframes[i]], PixelFormat::kGray, i, keyframes[i]);
+    const DetectionResult r = processImage(detector, frames[keyframes[i]], PixelFormat::kGray, i, keyframes[i]);
     EXPECT_TRUE(r.candidates.empty()) << "keyframe " << i << ": nothing is eligible yet";
   }
-  const DetectionResult r = detector.process(frames[281], PixelFormat::kGray, 8.0, 281);
+  const DetectionResult r = processImage(detector, frames[281], PixelFormat::kGray, 8.0, 281);
   EXPECT_EQ(r.stats.eligible_keyframes, 1u) << "one keyframe is eligible, and the band leaves it";
   ASSERT_FALSE(r.candidates.empty());
   const LoopCandidate& loop = r.candidates.front();
@@ -321,7 +322,7 @@ TEST(LoopDetector, ReportsARevisitAtTheFirstEligibleKeyframe) {
   // (docs/accuracy.md, "What is still missed"). The next keyframes of the revisit accept it.
   double best = loop.probability;
   for (size_t f : {286, 291}) {
-    const DetectionResult next = detector.process(frames[f], PixelFormat::kGray, static_cast<double>(f), f);
+    const DetectionResult next = processImage(detector, frames[f], PixelFormat::kGray, static_cast<double>(f), f);
     ASSERT_FALSE(next.candidates.empty());
     EXPECT_LE(next.candidates.front().id, 40u);
     best = std::max(best, next.candidates.front().probability);
@@ -336,14 +337,14 @@ TEST(LoopDetector, ReportsARevisitAtTheFirstEligibleKeyframe) {
 TEST(LoopDetector, StrongEvidenceIsReportedFirstWhereTheFilterBeliefSatElsewhere) {
   const std::vector<cv::Mat>& frames = fixtureFrames();
   LoopDetector detector(fixtureParams());
-  for (size_t i = 0; i < 50; ++i) detector.process(frames[i], PixelFormat::kGray, i, i);
+  for (size_t i = 0; i < 50; ++i) processImage(detector, frames[i], PixelFormat::kGray, i, i);
   // Where the filter's belief sits before the jump: near the start, where the revisit was heading.
-  const std::vector<double> belief = detector.filter().loopProbability();
+  const std::vector<double> belief = detector.map().filter().loopProbability();
   const auto believed = static_cast<size_t>(std::max_element(belief.begin(), belief.end()) - belief.begin());
   ASSERT_LT(believed, 12u) << "the test needs the filter's belief away from keyframe 25";
   ASSERT_LT(belief[25], 0.01);
   const cv::Mat& middle = test::sampleFrames()[25 * 5 + 2];
-  const DetectionResult r = detector.process(middle, PixelFormat::kGray, 50.0, 50);
+  const DetectionResult r = processImage(detector, middle, PixelFormat::kGray, 50.0, 50);
   ASSERT_FALSE(r.candidates.empty());
   const LoopCandidate& first = r.candidates.front();
   EXPECT_NEAR(static_cast<double>(first.id), 25.0, 2.0);
@@ -362,7 +363,7 @@ TEST(LoopDetector, AcceptedIsExactlyTheProbabilityAtTheDecision) {
     LoopDetector detector(p);
     size_t candidates = 0, accepted = 0, unverified = 0;
     for (size_t i = 0; i < frames.size(); ++i) {
-      for (const LoopCandidate& c : detector.process(frames[i], PixelFormat::kGray, 0.1 * i, i).candidates) {
+      for (const LoopCandidate& c : processImage(detector, frames[i], PixelFormat::kGray, 0.1 * i, i).candidates) {
         ++candidates;
         EXPECT_EQ(c.accepted, c.probability >= decision) << i << " -> " << c.id << " p=" << c.probability;
         if (!c.verification.verified) {
@@ -383,16 +384,16 @@ TEST(LoopDetector, RejectsDepthsAndCamerasThatDoNotFit) {
   f.keypoints.resize(3);
   f.descriptors.resize(3);
   f.depths.resize(2);
-  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
+  EXPECT_THROW(detector.process(Observation::ofFeatures(f, 0.0)), InvalidInput);
   f.depths.clear();
   f.camera = CameraIntrinsics{256.0, 0.0, 160.0, 120.0};
-  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
+  EXPECT_THROW(detector.process(Observation::ofFeatures(f, 0.0)), InvalidInput);
   f.camera.fy = std::numeric_limits<double>::infinity();
-  EXPECT_THROW(detector.process(f, 0.0), InvalidInput);
-  EXPECT_EQ(detector.size(), 0u);
+  EXPECT_THROW(detector.process(Observation::ofFeatures(f, 0.0)), InvalidInput);
+  EXPECT_EQ(detector.map().size(), 0u);
   f.camera.fy = 256.0;
-  detector.process(f, 0.0);
-  EXPECT_EQ(detector.record(0).camera, f.camera);
+  detector.process(Observation::ofFeatures(f, 0.0));
+  EXPECT_EQ(detector.map().record(0).camera, f.camera);
 }
 
 // Each stored keyframe keeps the camera it came with; the query's depths reach the verifier and
@@ -425,7 +426,7 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
     f.camera = camera_of(i);
     f.depths.assign(f.keypoints.size(), 2.5f);
     const size_t before = seen->cameras.size();
-    const DetectionResult r = detector.process(std::move(f), i);
+    const DetectionResult r = detector.process(Observation::ofFeatures(std::move(f), i));
     // Every judged candidate (reported or not) was verified once, in the order they were chosen.
     std::vector<double> expected, verified;
     for (const auto* list : {&r.candidates, &r.unreported}) {
@@ -435,7 +436,7 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
     for (size_t c = before; c < seen->cameras.size(); ++c) {
       EXPECT_EQ(seen->cameras[c].first, camera_of(i));
       verified.push_back(seen->cameras[c].second.fx);
-      EXPECT_EQ(seen->depths[c], detector.record(r.query_index).keypoints.size());
+      EXPECT_EQ(seen->depths[c], detector.map().record(r.query_index).keypoints.size());
     }
     std::sort(expected.begin(), expected.end());
     std::sort(verified.begin(), verified.end());
@@ -447,7 +448,7 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
 TEST(LoopDetector, RetunesWhatIsSafeWhileRunningAndRefusesTheRest) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());
-  for (size_t i = 0; i < 50; ++i) detector.process(frames[i], PixelFormat::kGray, 0.5 * i);
+  for (size_t i = 0; i < 50; ++i) processImage(detector, frames[i], PixelFormat::kGray, 0.5 * i);
 
   DetectorParams fewer = detector.params();
   fewer.candidates.max_candidates = 1;
@@ -455,7 +456,7 @@ TEST(LoopDetector, RetunesWhatIsSafeWhileRunningAndRefusesTheRest) {
   detector.retune(fewer);
   EXPECT_EQ(detector.params().candidates.max_candidates, 1);
   for (size_t i = 50; i < 60; ++i) {
-    const DetectionResult r = detector.process(frames[i], PixelFormat::kGray, 0.5 * i);
+    const DetectionResult r = processImage(detector, frames[i], PixelFormat::kGray, 0.5 * i);
     EXPECT_LE(r.candidates.size(), 1u);
     for (const LoopCandidate& c : r.candidates) EXPECT_EQ(c.accepted, c.verification.verified && c.probability >= 0.99);
   }
@@ -485,19 +486,19 @@ TEST(LoopDetector, RetunesWhatIsSafeWhileRunningAndRefusesTheRest) {
   detector.retune(looser);
   EXPECT_EQ(detector.params().verification.min_inliers, 12);
   const int before = seen->calls;
-  detector.process(frames[50], PixelFormat::kGray, 40.0);
+  processImage(detector, frames[50], PixelFormat::kGray, 40.0);
   EXPECT_GT(seen->calls, before) << "the installed verifier was replaced";
 }
 
 TEST(LoopDetector, ResetForgetsEverything) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());
-  for (size_t i = 0; i < 10; ++i) detector.process(frames[i], PixelFormat::kGray, i, 100 + i);
-  detector.reset();
-  EXPECT_EQ(detector.size(), 0u);
-  EXPECT_EQ(detector.database().size(), 0u);
-  EXPECT_FALSE(detector.find(100));
-  EXPECT_EQ(detector.process(frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
+  for (size_t i = 0; i < 10; ++i) processImage(detector, frames[i], PixelFormat::kGray, i, 100 + i);
+  detector.map().reset();
+  EXPECT_EQ(detector.map().size(), 0u);
+  EXPECT_EQ(detector.map().database().size(), 0u);
+  EXPECT_FALSE(detector.map().find(100));
+  EXPECT_EQ(processImage(detector, frames[0], PixelFormat::kGray, 0.0).query_id, 0u);
 }
 
 }  // namespace

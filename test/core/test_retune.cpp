@@ -56,7 +56,8 @@ std::string outputs(LoopDetector& detector) {
   std::ostringstream out;
   out.precision(17);
   for (size_t i = 0; i < keyframes().size(); ++i) {
-    const DetectionResult r = detector.process(keyframes()[i], 0.2 * static_cast<double>(i), i);
+    const DetectionResult r =
+        detector.process(Observation::ofFeatures(keyframes()[i], 0.2 * static_cast<double>(i), i));
     out << i << ":";
     for (const LoopCandidate& c : r.candidates) {
       const Verification& v = c.verification;

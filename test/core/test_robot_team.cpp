@@ -13,6 +13,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
+#include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
@@ -51,7 +53,7 @@ TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
   LoopDetector lone(DetectorParams{});
   std::vector<ScoredPair> lone_pairs;
   for (int i = 0; i < kFrames; ++i) {
-    const DetectionResult r = lone.process(frames()[i], PixelFormat::kGray, 0.1 * i, static_cast<uint64_t>(i));
+    const DetectionResult r = processImage(lone, frames()[i], PixelFormat::kGray, 0.1 * i, static_cast<uint64_t>(i));
     for (const LoopCandidate& c : r.candidates) {
       if (i >= kHalf && static_cast<int>(c.id) < kHalf)
         lone_pairs.push_back({i, static_cast<int>(c.id), c.probability});
@@ -63,10 +65,12 @@ TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
   std::vector<ScoredPair> team_pairs;
   size_t intra_b = 0, wrong_tags = 0;
   for (int k = 0; k < kHalf; ++k) {
-    const DetectionResult ra = team.process(0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+    const DetectionResult ra =
+        processImage(team, 0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
     EXPECT_EQ(ra.query_robot, 0u);
     const int j = kHalf + k;
-    const DetectionResult rb = team.process(1, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
+    const DetectionResult rb =
+        processImage(team, 1, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
     EXPECT_EQ(rb.query_robot, 1u);
     for (const LoopCandidate& c : ra.candidates) wrong_tags += (c.robot == 0) != (c.id < kHalf);
     for (const LoopCandidate& c : rb.candidates) {
@@ -79,8 +83,8 @@ TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
     }
   }
   EXPECT_EQ(wrong_tags, 0u) << "a candidate named the wrong robot's map";
-  EXPECT_EQ(team.robot(0).size(), static_cast<size_t>(kHalf));
-  EXPECT_EQ(team.robot(1).size(), static_cast<size_t>(kHalf));
+  EXPECT_EQ(team.robot(0).map().size(), static_cast<size_t>(kHalf));
+  EXPECT_EQ(team.robot(1).map().size(), static_cast<size_t>(kHalf));
   EXPECT_EQ(team.keyframes(), static_cast<size_t>(kFrames));
 
   const Metrics lone_m = evaluate(truth, lone_pairs, 40);
@@ -114,9 +118,9 @@ TEST(RobotTeam, FindsTheLoopsIntoAMapAskedInTurn) {
       cv::Mat mirrored, upside_down;
       cv::flip(frames()[k], mirrored, 1);
       cv::flip(frames()[k], upside_down, 0);
-      team.process(0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
-      team.process(1, mirrored, PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
-      team.process(2, upside_down, PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+      processImage(team, 0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+      processImage(team, 1, mirrored, PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+      processImage(team, 2, upside_down, PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
       const int j = kHalf + k;
       const std::vector<size_t> asked = team.mapsAskedNext(3);
       if (std::count(asked.begin(), asked.end(), size_t{0}) == 1) {
@@ -128,7 +132,8 @@ TEST(RobotTeam, FindsTheLoopsIntoAMapAskedInTurn) {
         }
         if (truth.loop_queries.count(j) > 0) asked_truth.loop_queries.insert(j);
       }
-      const DetectionResult r = team.process(3, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
+      const DetectionResult r =
+          processImage(team, 3, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
       for (const LoopCandidate& c : r.candidates) {
         if (c.robot == 0) pairs.push_back({j, static_cast<int>(c.id), c.probability});
         wrong_map += (c.robot == 1 || c.robot == 2) && c.accepted;
@@ -165,12 +170,13 @@ TEST(RobotTeam, NeverPublishesMoreThanMaxCandidatesPerKeyframe) {
     RobotTeam team(params, {"a", "b", "c"});
     constexpr int kMapped = 100;
     for (int k = 0; k < kMapped; k += 2) {
-      team.process(0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
-      team.process(1, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(1000 + k));
+      processImage(team, 0, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(k));
+      processImage(team, 1, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(1000 + k));
     }
     size_t from_both_maps = 0;
     for (int j = kMapped; j < kFrames; j += 2) {
-      const DetectionResult r = team.process(2, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
+      const DetectionResult r =
+          processImage(team, 2, frames()[j], PixelFormat::kGray, 0.1 * j, static_cast<uint64_t>(j));
       ASSERT_LE(r.candidates.size(), static_cast<size_t>(max_candidates)) << "keyframe " << j;
       bool in_a = false, in_b = false;
       for (const LoopCandidate& c : r.candidates) {
@@ -198,7 +204,7 @@ TEST(RobotTeam, AsksOtherMapsInTurn) {
     RobotTeam team(params, {"a", "b", "c", "d"});
     for (int k = 0; k < 60; ++k) {
       for (size_t r = 0; r < 3; ++r) {
-        team.process(r, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(1000 * r + k));
+        processImage(team, r, frames()[k], PixelFormat::kGray, 0.1 * k, static_cast<uint64_t>(1000 * r + k));
       }
     }
     std::vector<size_t> times_asked(4, 0);
@@ -209,7 +215,7 @@ TEST(RobotTeam, AsksOtherMapsInTurn) {
         ASSERT_LT(m, 3u) << "never its own map";
         ++times_asked[m];
       }
-      const DetectionResult r = team.process(3, frames()[j - 55], PixelFormat::kGray, 0.1 * j);
+      const DetectionResult r = processImage(team, 3, frames()[j - 55], PixelFormat::kGray, 0.1 * j);
       for (const LoopCandidate& c : r.candidates) {
         EXPECT_TRUE(c.robot == 3 || std::count(asked.begin(), asked.end(), c.robot) == 1)
             << "keyframe " << j << ": a candidate from map " << c.robot << ", which it did not ask";
@@ -231,8 +237,8 @@ TEST(RobotTeam, ATeamOfOneIsALoneDetector) {
   LoopDetector lone(DetectorParams{});
   RobotTeam team(DetectorParams{}, {"solo"});
   for (int i = 0; i < 120; i += 2) {
-    const DetectionResult a = lone.process(frames()[i], PixelFormat::kGray, 0.1 * i);
-    const DetectionResult b = team.process(0, frames()[i], PixelFormat::kGray, 0.1 * i);
+    const DetectionResult a = processImage(lone, frames()[i], PixelFormat::kGray, 0.1 * i);
+    const DetectionResult b = processImage(team, 0, frames()[i], PixelFormat::kGray, 0.1 * i);
     ASSERT_EQ(a.similarity, b.similarity) << i;
     ASSERT_EQ(a.candidates.size(), b.candidates.size()) << i;
     for (size_t c = 0; c < a.candidates.size(); ++c) {
@@ -250,9 +256,9 @@ TEST(RobotTeam, RefusesBadRobotsAndKeepsEveryMapAsItWas) {
   RobotTeam team(DetectorParams{}, {"a", "b"});
   EXPECT_EQ(team.find("b"), std::optional<size_t>(1));
   EXPECT_EQ(team.find("c"), std::nullopt);
-  team.process(0, frames()[0], PixelFormat::kGray, 0.0);
-  EXPECT_THROW(team.process(2, frames()[1], PixelFormat::kGray, 0.1), InvalidInput);
-  EXPECT_THROW(team.process(1, cv::Mat(), PixelFormat::kGray, 0.1), InvalidInput);  // the robot refuses it
+  processImage(team, 0, frames()[0], PixelFormat::kGray, 0.0);
+  EXPECT_THROW(processImage(team, 2, frames()[1], PixelFormat::kGray, 0.1), InvalidInput);
+  EXPECT_THROW(processImage(team, 1, cv::Mat(), PixelFormat::kGray, 0.1), InvalidInput);  // the robot refuses it
   EXPECT_EQ(team.keyframes(), 1u);
   // Retuning reaches every robot, and a refused retune changes none.
   DetectorParams next = team.params();
@@ -267,27 +273,29 @@ TEST(RobotTeam, RefusesBadRobotsAndKeepsEveryMapAsItWas) {
   EXPECT_EQ(team.keyframes(), 0u);
 }
 
-// The ROS worker extracts a keyframe ahead of the detector, on a thread of its own, with
-// extractFeatures and an extractor built from the same parameters: the team answers the extracted
-// observation exactly as it answers the image, and reports the extraction's time.
-TEST(RobotTeam, FeaturesExtractedAheadGiveTheSameAnswersAndTheirExtractionTime) {
+// The ROS worker extracts a keyframe ahead of the detector, on a thread of its own, with the
+// FeatureFrontEnd it owns: the team answers the extracted observation exactly as it answers the
+// image through processImage (a front-end of the team's parameters), and reports the extraction's
+// time. The detector itself takes features only: an image observation is refused, changing nothing.
+TEST(RobotTeam, FeaturesExtractedByAFrontEndGiveTheSameAnswersAndTheirExtractionTime) {
   const std::vector<cv::Mat>& images = test::fixtureFrames();
   DetectorParams p;
   p.candidates.exclusion_frames = 8;  // the fixture is every 5th frame
   RobotTeam direct(p, {""}), ahead(p, {""});
-  const auto extractor = makeFeatureExtractor(p.features);
+  const FeatureFrontEnd front_end(p.features);
   const CameraIntrinsics camera{300.0, 300.0, 160.0, 120.0};
   size_t candidates = 0, verified = 0;
   for (size_t i = 0; i < images.size(); ++i) {
     const Observation image = Observation::ofImage(images[i], PixelFormat::kGray, 0.5 * i, std::nullopt, camera);
-    Observation extracted = extractFeatures(image, *extractor, p.features.descriptorBytes());
+    EXPECT_THROW(ahead.process(image), InvalidInput) << "the detector extracts nothing";
+    Observation extracted = front_end.extract(image);
     ASSERT_FALSE(extracted.image.has_value());
     EXPECT_EQ(extracted.features.camera, camera);
     EXPECT_GT(extracted.extract_ms, 0.0);
     const double extract_ms = extracted.extract_ms;
-    const DetectionResult a = direct.process(image);
+    const DetectionResult a = processImage(direct, 0, images[i], PixelFormat::kGray, 0.5 * i, std::nullopt, camera);
     const DetectionResult b = ahead.process(std::move(extracted));
-    EXPECT_EQ(b.stats.extract_ms, extract_ms) << "reported as the detector's own extraction is";
+    EXPECT_EQ(b.stats.extract_ms, extract_ms) << "reported as the front-end measured it";
     EXPECT_GT(a.stats.extract_ms, 0.0);
     EXPECT_EQ(a.query_id, b.query_id);
     EXPECT_EQ(a.stats.features, b.stats.features);
@@ -304,28 +312,23 @@ TEST(RobotTeam, FeaturesExtractedAheadGiveTheSameAnswersAndTheirExtractionTime) 
   }
   EXPECT_GT(candidates, 0u);
   EXPECT_GT(verified, 0u) << "the revisit is verified, with the features' camera";
+  EXPECT_EQ(ahead.keyframes(), images.size()) << "a refused image observation stored nothing";
 
-  // Features pass through unchanged; a width the extractor does not make is refused with the
-  // message the detector gives an image.
-  const Observation features = extractFeatures(Observation::ofFeatures(Features{}, 1.0, 7), *extractor, 32);
+  // Features pass through unchanged; a width the extractor does not make is refused, saying so.
+  const Observation features = front_end.extract(Observation::ofFeatures(Features{}, 1.0, 7));
   EXPECT_EQ(features.id, std::optional<uint64_t>(7));
   EXPECT_EQ(features.extract_ms, 0.0);
   DetectorParams narrow = p;
   narrow.features.descriptor_bytes = 16;
   LoopDetector refuses(narrow);
-  std::string by_detector, ahead_of_it;
+  std::string why;
   try {
-    refuses.process(images[0], PixelFormat::kGray, 1.0);
+    processImage(refuses, images[0], PixelFormat::kGray, 1.0);
   } catch (const InvalidInput& e) {
-    by_detector = e.what();
+    why = e.what();
   }
-  try {
-    extractFeatures(Observation::ofImage(images[0], PixelFormat::kGray, 1.0), *extractor, 16);
-  } catch (const InvalidInput& e) {
-    ahead_of_it = e.what();
-  }
-  EXPECT_NE(by_detector.find("16-byte descriptors"), std::string::npos) << by_detector;
-  EXPECT_EQ(by_detector, ahead_of_it);
+  EXPECT_NE(why.find("16-byte descriptors"), std::string::npos) << why;
+  EXPECT_EQ(refuses.map().size(), 0u);
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "test_images.hpp"
@@ -34,7 +35,7 @@ const std::vector<cv::Mat>& frames() { return test::sampleFrames(); }
 void run(LoopDetector& d, int first, int last, std::vector<ScoredPair>& out,
          std::vector<DetectionResult>* results = nullptr) {
   for (int i = first; i < last; ++i) {
-    DetectionResult r = d.process(frames()[i], PixelFormat::kGray, 0.1 * i, static_cast<uint64_t>(i));
+    DetectionResult r = processImage(d, frames()[i], PixelFormat::kGray, 0.1 * i, static_cast<uint64_t>(i));
     for (const LoopCandidate& c : r.candidates) out.push_back({i, static_cast<int>(c.id), c.probability});
     if (results) results->push_back(std::move(r));
   }
@@ -74,11 +75,11 @@ TEST_F(Sessions, AMapReloadedAsANewSessionFindsTheSecondHalfsLoopsAsWellAsOneRun
   LoopDetector first;
   std::vector<ScoredPair> ignored, split;
   run(first, 0, 150, ignored);
-  saveDetector(first, path("first_half.mild"));
+  saveMap(first.map(), path("first_half.mild"));
 
   LoopDetector second;
-  loadDetector(second, path("first_half.mild"), false);
-  EXPECT_EQ(second.session(), 1u);
+  loadMap(second.map(), path("first_half.mild"), false);
+  EXPECT_EQ(second.map().session(), 1u);
   std::vector<DetectionResult> results;
   run(second, 150, kFrames, split, &results);
   size_t across = 0;
@@ -108,19 +109,19 @@ TEST_F(Sessions, AMergedMapKeepsBothMapsAndItsLoopsAreFound) {
   LoopDetector yesterday;
   std::vector<ScoredPair> ignored, merged_run;
   run(yesterday, 0, 150, ignored);
-  saveDetector(yesterday, path("yesterday.mild"));
+  saveMap(yesterday.map(), path("yesterday.mild"));
 
   LoopDetector today;
   run(today, 150, 225, merged_run);
-  const uint64_t next_id = today.nextId();
-  const LoadReport report = mergeDetector(today, path("yesterday.mild"));
+  const uint64_t next_id = today.map().nextId();
+  const LoadReport report = mergeMap(today.map(), path("yesterday.mild"));
   EXPECT_NE(report.message.find("merged 150 keyframes"), std::string::npos) << report.message;
-  ASSERT_EQ(today.size(), 225u);
-  EXPECT_EQ(today.session(), 0u) << "the running session goes on";
-  EXPECT_EQ(today.sessionStart(), 150u) << "the merged map comes before the running session";
-  EXPECT_EQ(today.nextId(), next_id);
-  for (uint64_t id : {0ull, 149ull}) EXPECT_EQ(today.record(*today.find(id)).session, 1u);
-  for (uint64_t id : {150ull, 224ull}) EXPECT_EQ(today.record(*today.find(id)).session, 0u);
+  ASSERT_EQ(today.map().size(), 225u);
+  EXPECT_EQ(today.map().session(), 0u) << "the running session goes on";
+  EXPECT_EQ(today.map().sessionStart(), 150u) << "the merged map comes before the running session";
+  EXPECT_EQ(today.map().nextId(), next_id);
+  for (uint64_t id : {0ull, 149ull}) EXPECT_EQ(today.map().record(*today.map().find(id)).session, 1u);
+  for (uint64_t id : {150ull, 224ull}) EXPECT_EQ(today.map().record(*today.map().find(id)).session, 0u);
 
   std::vector<DetectionResult> results;
   run(today, 225, kFrames, merged_run, &results);
@@ -152,8 +153,8 @@ TEST_F(Sessions, AMergedMapKeepsBothMapsAndItsLoopsAreFound) {
       << "one run " << one_run.recall_at_100_precision << ", merged " << merged.recall_at_100_precision;
 
   // Every session is saved and comes back.
-  saveDetector(today, path("both.mild"));
-  const DetectorState state = readDetectorFile(path("both.mild"));
+  saveMap(today.map(), path("both.mild"));
+  const MapState state = readMapFile(path("both.mild"));
   ASSERT_EQ(state.records.size(), 300u);  // 150 merged, 150 of the running session
   EXPECT_EQ(state.records.front().session, 1u);
   EXPECT_EQ(state.records.back().session, 0u);
@@ -163,20 +164,20 @@ TEST_F(Sessions, AMergeThatSharesAnIdIsRefusedAndChangesNothing) {
   LoopDetector other;
   std::vector<ScoredPair> ignored;
   run(other, 0, 20, ignored);
-  saveDetector(other, path("other.mild"));
+  saveMap(other.map(), path("other.mild"));
   LoopDetector running;
   run(running, 15, 60, ignored);  // ids 15..59: 15..19 are in both
-  const size_t size = running.size();
+  const size_t size = running.map().size();
   try {
-    mergeDetector(running, path("other.mild"));
+    mergeMap(running.map(), path("other.mild"));
     FAIL() << "merged two maps that share ids";
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("keyframe id 15 is in both maps"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("other.mild"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(running.size(), size);
-  EXPECT_EQ(running.sessionStart(), 0u);
-  EXPECT_EQ(running.process(frames()[60], PixelFormat::kGray, 6.0).query_id, 60u);
+  EXPECT_EQ(running.map().size(), size);
+  EXPECT_EQ(running.map().sessionStart(), 0u);
+  EXPECT_EQ(processImage(running, frames()[60], PixelFormat::kGray, 6.0).query_id, 60u);
 }
 
 }  // namespace

@@ -1,4 +1,4 @@
-// libFuzzer target: the database file loader. Any bytes must give a DetectorState or InvalidInput,
+// libFuzzer target: the database file loader. Any bytes must give a MapState or InvalidInput,
 // and a parsed state must restore into a detector or be refused with InvalidInput; never a crash,
 // a sanitizer report, or an unbounded allocation. Built with FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION
 // so that the checksums do not stop the fuzzer at the door.
@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -17,15 +18,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     return p;
   }();
   try {
-    mild::DetectorState state = mild::parseDetectorState(data, size, "fuzz input");
+    mild::MapState state = mild::parseMapState(data, size, "fuzz input");
     mild::LoopDetector detector(params);
     const bool continue_session = size % 2 == 0;
-    detector.restore(std::move(state), continue_session);
+    detector.map().restore(std::move(state), continue_session);
     // The restored detector must work.
     mild::Features features;
     features.keypoints.resize(2);
     features.descriptors.resize(2);
-    detector.process(features, 1e9);
+    detector.process(mild::Observation::ofFeatures(features, 1e9));
   } catch (const mild::Error&) {
   }
   return 0;

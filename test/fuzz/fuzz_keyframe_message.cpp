@@ -8,6 +8,7 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 
 namespace {
@@ -66,7 +67,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       const mild::Features f = mild_lcd::featuresFromMsg(msg);
       std::optional<uint64_t> id;
       if (msg.has_id) id = msg.id;
-      detector(in.ConsumeBool() ? 1 : 0).process(f, msg.header.stamp.toSec(), id);
+      detector(in.ConsumeBool() ? 1 : 0).process(mild::Observation::ofFeatures(f, msg.header.stamp.toSec(), id));
     } else {
       const int which = in.ConsumeIntegralInRange<int>(0, 2);
       sensor_msgs::Image msg;
@@ -80,7 +81,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       msg.data = in.ConsumeRemainingBytes<uint8_t>();
       if (exact) msg.data.resize(static_cast<size_t>(msg.step) * msg.height);
       const mild_lcd::DecodedImage image = mild_lcd::imageFromMsg(msg);
-      detector(which).process(image.image, image.format, 0.0);
+      mild::processImage(detector(which), image.image, image.format, 0.0);
     }
   } catch (const mild::Error&) {
   }

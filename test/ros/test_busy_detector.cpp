@@ -14,6 +14,7 @@
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoadDatabase.h"
 #include "mild_lcd/LoopClosure.h"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "ros_test_support.hpp"
 
@@ -39,7 +40,7 @@ mild::Descriptor randomDescriptor(cv::RNG& rng) {
 // A map of `keyframes` x `features` random features under ids from 1,000,000: merging it rebuilds
 // an index of that many features while the merge holds the detector.
 void writeLargeMap(const std::string& path, size_t keyframes, size_t features) {
-  mild::DetectorState state;
+  mild::MapState state;
   state.parameters = "";
   cv::RNG rng(17);
   for (size_t k = 0; k < keyframes; ++k) {
@@ -56,8 +57,8 @@ void writeLargeMap(const std::string& path, size_t keyframes, size_t features) {
   }
   state.next_id = 1000000 + keyframes;
   mild::LoopDetector detector;
-  detector.restore(std::move(state), false);
-  mild::saveDetector(detector, path);
+  detector.map().restore(std::move(state), false);
+  mild::saveMap(detector.map(), path);
 }
 
 mild_lcd::Keyframe randomKeyframe(cv::RNG& rng, double stamp) {

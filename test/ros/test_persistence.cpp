@@ -25,6 +25,7 @@
 #include "mild_lcd/LoadDatabase.h"
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SaveDatabase.h"
+#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "ros_test_support.hpp"
@@ -91,7 +92,7 @@ TEST(Persistence, SaveResetLoadAndDetectLoopsAgainstTheLoadedMap) {
   save.path = map;
   const auto saved = call<mild_lcd::SaveDatabase>("save_database", save);
   ASSERT_TRUE(saved.response.success) << saved.response.message;
-  EXPECT_EQ(mild::readDetectorFile(map).records.size(), 47u);
+  EXPECT_EQ(mild::readMapFile(map).records.size(), 47u);
 
   std_srvs::Trigger reset;
   ASSERT_TRUE(ros::service::call("reset", reset));
@@ -167,12 +168,12 @@ TEST(Persistence, MergeAddsASavedMapToTheRunningOne) {
   save.path = "lap.mild";
   ASSERT_TRUE(call<mild_lcd::SaveDatabase>("save_database", save).response.success);
   // The same lap as another robot would have saved it: ids 1000.., its own session numbering.
-  mild::DetectorState state = mild::readDetectorFile((scratch() / "lap.mild").string());
+  mild::MapState state = mild::readMapFile((scratch() / "lap.mild").string());
   for (auto& r : state.records) r.id += 1000;
   state.next_id += 1000;
   mild::LoopDetector other;
-  other.restore(std::move(state), false);
-  mild::saveDetector(other, (scratch() / "other_robot.mild").string());
+  other.map().restore(std::move(state), false);
+  mild::saveMap(other.map(), (scratch() / "other_robot.mild").string());
 
   ASSERT_TRUE(ros::service::call("reset", reset));
   ASSERT_EQ(feed(0, 20).size(), 20u);  // ids 0..19: the running session
@@ -229,7 +230,7 @@ pid_t startNode(const std::string& ns, const std::string& map) {
 TEST(Persistence, LoadOnStartAndSaveOnShutdown) {
   const std::string map = (scratch() / "corridor.mild").string();
   ASSERT_TRUE(fs::exists(map)) << "written by the previous case";
-  const size_t stored = mild::readDetectorFile(map).records.size();
+  const size_t stored = mild::readMapFile(map).records.size();
 
   const pid_t node = startNode("/session", map);
   ASSERT_GT(node, 0);
@@ -251,7 +252,7 @@ TEST(Persistence, LoadOnStartAndSaveOnShutdown) {
   kill(node, SIGINT);
   int status = 0;
   waitpid(node, &status, 0);
-  EXPECT_EQ(mild::readDetectorFile(map).records.size(), stored + 1) << "saved on shutdown";
+  EXPECT_EQ(mild::readMapFile(map).records.size(), stored + 1) << "saved on shutdown";
 
   fs::remove_all(scratch());
 }
@@ -346,7 +347,7 @@ TEST(Persistence, SigintAndSigtermSaveTheMapInANodeletManagerAndTheNode) {
       EXPECT_FALSE(fs::exists(map)) << what << ": nothing saved before the signal";
       ASSERT_TRUE(node.stop(signal, 20.0)) << what << " did not stop";
       ASSERT_TRUE(fs::exists(map)) << what << " stopped and did not save";
-      EXPECT_EQ(mild::readDetectorFile(map).records.size(), 3u) << what;
+      EXPECT_EQ(mild::readMapFile(map).records.size(), 3u) << what;
     }
   }
 }
@@ -364,7 +365,7 @@ TEST(Persistence, AutosaveBoundsWhatSigkillLoses) {
   while (saved < 5 && ros::WallTime::now() < end) {
     ros::WallDuration(0.2).sleep();
     try {
-      saved = fs::exists(map) ? mild::readDetectorFile(map).records.size() : 0;
+      saved = fs::exists(map) ? mild::readMapFile(map).records.size() : 0;
     } catch (const std::exception&) {
       saved = 0;  // never half a file: saves are renamed into place; an error here is a failure below
     }
@@ -372,7 +373,7 @@ TEST(Persistence, AutosaveBoundsWhatSigkillLoses) {
   EXPECT_EQ(saved, 5u) << "no periodic save within 30 s of a 1 s period";
   ASSERT_TRUE(node.stop(SIGKILL, 20.0));
   ASSERT_TRUE(fs::exists(map));
-  EXPECT_EQ(mild::readDetectorFile(map).records.size(), 5u) << "what the last periodic save held";
+  EXPECT_EQ(mild::readMapFile(map).records.size(), 5u) << "what the last periodic save held";
 }
 
 // A corrupt map at start-up: the node says why (naming the file), refuses keyframes rather than
@@ -460,7 +461,7 @@ TEST(Persistence, ShutdownWithAFullQueueSavesWhatWasProcessedInTime) {
     answered = outputs.size();
   }
   ASSERT_TRUE(fs::exists(map));
-  const size_t saved = mild::readDetectorFile(map).records.size();
+  const size_t saved = mild::readMapFile(map).records.size();
   EXPECT_GE(saved, answered) << "every answered keyframe is in the saved map";
   EXPECT_LT(saved, 2000u) << "the queue was not worked off before saving";
 }

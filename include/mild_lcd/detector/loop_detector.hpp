@@ -4,16 +4,17 @@
 #include <memory>
 #include <optional>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
 #include <opencv2/core.hpp>
 
 #include "mild_lcd/detector/candidate_scorer.hpp"
+#include "mild_lcd/detector/observation.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/filter/filters.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
 #include "mild_lcd/place/keyframe_database.hpp"
+#include "mild_lcd/place/keyframe_map.hpp"
 #include "mild_lcd/verification/candidate_verifier.hpp"
 #include "mild_lcd/verification/geometric_verifier.hpp"
 
@@ -145,46 +146,12 @@ struct MapAnswer {
   double filter_ms = 0.0;
 };
 
-class LoopDetector;
-
 // A map a keyframe is looked up in besides its detector's own (RobotTeam: another robot's), through
 // a temporal filter of its own for this pair of maps.
 struct OtherMap {
-  const LoopDetector* map = nullptr;
+  const KeyframeMap* map = nullptr;
   TemporalFilter* filter = nullptr;
   uint32_t robot = 0;  // LoopCandidate::robot of its candidates
-};
-
-// A stored keyframe, as handed to verifiers and clients (e.g. the sparse-match service).
-struct KeyframeRecord {
-  uint64_t id = 0;
-  double stamp = 0.0;
-  uint32_t session = 0;
-  std::vector<cv::KeyPoint> keypoints;
-  CameraIntrinsics camera;  // unknown unless the keyframe brought them
-};
-
-// Everything a detector has learnt, as plain data: what database_file.hpp saves and loads.
-struct DetectorState {
-  std::string parameters;                      // "name: value" lines of the detector that saved it (describeParameters)
-  int descriptor_bytes = kOrbDescriptorBytes;  // the width of every descriptor below
-  uint64_t next_id = 0;
-  KeyframeIndex session_start = 0;
-  std::vector<KeyframeRecord> records;      // in database order
-  std::vector<DescriptorList> descriptors;  // one list per record, one descriptor per keypoint
-  std::string filter_name;                  // TemporalFilter::name() of the filter that saved it
-  std::vector<uint8_t> filter_state;        // its saveState()
-};
-
-// A state checked and turned into a ready database and filter, waiting to replace a detector's.
-struct PreparedRestore {
-  KeyframeDatabase database;
-  std::unique_ptr<TemporalFilter> filter;
-  std::vector<KeyframeRecord> records;
-  std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
-  uint64_t next_id = 0;
-  KeyframeIndex session_start = 0;
-  uint32_t session = 0;  // the session new keyframes join
 };
 
 // Sorts candidates best first by probability (stable) and drops those below min_probability.
@@ -196,11 +163,12 @@ void rankCandidates(std::vector<LoopCandidate>& candidates, double min_probabili
 std::vector<KeyframeIndex> separatedBest(const std::vector<double>& belief, const std::vector<double>& similarity,
                                          size_t max_count, KeyframeIndex suppression_radius);
 
-// Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
-constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
-
-// The loop-closure pipeline: features -> MIH database (insert and query) -> Bayesian filter ->
-// ranked candidates -> optional geometric verification. Not thread-safe: callers serialise access.
+// The loop-closure pipeline over a keyframe map (place/keyframe_map.hpp): a keyframe's features ->
+// MIH query of the map (and of other robots' maps) -> Bayesian filter -> ranked candidates ->
+// optional geometric verification and scoring -> the keyframe stored in the map. The detector owns
+// its map; the pipeline's parts (scorer, verifier, the candidate parameters) are what retune
+// changes. Images become features before they get here (detector/feature_front_end.hpp).
+// Not thread-safe: callers serialise access.
 class LoopDetector {
  public:
   explicit LoopDetector(const DetectorParams& params = {});
@@ -208,11 +176,15 @@ class LoopDetector {
 
   const DetectorParams& params() const { return params_; }
 
+  // The map this detector's keyframes are stored in: read it, save it, load, merge or reset it.
+  const KeyframeMap& map() const { return map_; }
+  KeyframeMap& map() { return map_; }
+
   // Changes the parameters while running. Only runtimeParameterNames() may differ from params()
   // (detector/detector_parameters.hpp); anything else, or an invalid value, throws InvalidInput naming it and changes
   // nothing. A changed verification rebuilds the GeometricVerifier (a verifier installed with
   // setVerifier is kept). Touches only the candidate, scoring and verification parameters, so
-  // prepareRestore (which reads the database and filter ones) may run beside it.
+  // a map's prepareRestore (which reads the database and filter ones) may run beside it.
   void retune(const DetectorParams& next);
   // How many retunes took effect: callers holding a copy of some parameters (a verifier of their
   // own) refresh it when this changes.
@@ -223,88 +195,26 @@ class LoopDetector {
   void setVerifier(std::unique_ptr<CandidateVerifier> verifier) { verifier_ = std::move(verifier); }
   bool verifies() const { return verifier_ != nullptr; }
 
-  // Processes one keyframe image. Throws InvalidInput (and changes nothing) for an unusable image, an
-  // id already in the database or above kMaxKeyframeId, or when features/descriptor_bytes differs
-  // from what the extractor produces. Without an id, the next free one (largest so
-  // far + 1) is used; CapacityError once that would pass kMaxKeyframeId.
-  // `camera`: the image's intrinsics when known (they give verified loops a relative pose).
-  DetectionResult process(const cv::Mat& image, PixelFormat format, double stamp,
-                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {},
-                          const std::vector<OtherMap>& others = {}, uint32_t robot = 0);
-  // Same, for features computed elsewhere (e.g. by the SLAM front-end). Their descriptors must have
-  // the database's width (descriptorBytes()). Their camera is stored with the keyframe; their depths
-  // serve this query's verification only.
+  // Processes one keyframe: its features (extracted by a FeatureFrontEnd, or computed elsewhere,
+  // e.g. by the SLAM front-end), stamp and optional id. Their descriptors must have the map's width
+  // (KeyframeMap::descriptorBytes()). Their camera is stored with the keyframe (it gives verified
+  // loops a relative pose); their depths serve this query's verification only. Without an id, the
+  // next free one (largest so far + 1) is used. observation.extract_ms is reported as
+  // stats.extract_ms. Throws InvalidInput (and changes nothing) for an observation still holding an
+  // image, mismatched keypoints and descriptors, another width, an id already in the map or above
+  // kMaxKeyframeId, a non-finite stamp; CapacityError once no id is left to assign.
   // `others`: maps to look the keyframe up in besides this one (RobotTeam); their candidates are
   // verified, scored and ranked with this map's, and max_candidates bounds them all together.
   // `robot`: LoopCandidate::robot of this map's candidates and DetectionResult::query_robot.
-  DetectionResult process(Features features, double stamp, std::optional<uint64_t> id = std::nullopt,
-                          const std::vector<OtherMap>& others = {}, uint32_t robot = 0);
+  DetectionResult process(Observation observation, const std::vector<OtherMap>& others = {}, uint32_t robot = 0);
 
-  // The one "query a map" step, for this detector's own keyframes and for another's (RobotTeam):
-  // `query` against this map's keyframes in `scope`, `filter`'s belief over them (it is updated),
-  // and up to `max_candidates` of them, local maxima of the belief at least suppression_radius
-  // apart. Changes neither the map nor anything but `filter`.
-  MapAnswer queryMap(const DescriptorList& query, const MapScope& scope, TemporalFilter& filter,
+  // The one "query a map" step, for this detector's own keyframes and for another robot's map
+  // (RobotTeam): `query` against `map`'s keyframes in `scope`, `filter`'s belief over them (it is
+  // updated), and up to `max_candidates` of them, local maxima of the belief at least
+  // suppression_radius apart, then the most similar. Changes neither map nor anything but `filter`.
+  MapAnswer queryMap(const KeyframeMap& map, const DescriptorList& query, const MapScope& scope, TemporalFilter& filter,
                      size_t max_candidates) const;
 
-  // Replaces everything the detector has learnt by `state` (the index is rebuilt from the
-  // descriptors with this detector's parameters). continue_session = true resumes exactly where the
-  // saved run stopped: the same outputs as if it had never stopped (it needs the state of a filter
-  // of this detector's filter/type). false starts a new session on the stored map (e.g.
-  // yesterday's): the loaded keyframes are exempt from the temporal exclusion, since they were not
-  // seen a moment ago, and the filter starts from "no loop".
-  // Throws InvalidInput, changing nothing, when the state is inconsistent.
-  void restore(DetectorState state, bool continue_session);
-  // restore() in two steps: prepareRestore reads only the detector's parameters (fixed at
-  // construction), so it may run without the caller's lock; commitRestore cannot fail.
-  PreparedRestore prepareRestore(DetectorState state, bool continue_session) const;
-  void commitRestore(PreparedRestore&& prepared);
-  // Adds the keyframes of a saved map (yesterday's, another robot's) to this one, keeping both: they
-  // become earlier sessions (their session numbers shifted above every number in use here), always
-  // eligible as candidates, while the running session goes on. The index is rebuilt (the running
-  // session's keyframes stay last, so the temporal exclusion still reads a prefix) and the filter
-  // restarts from "no loop", as for a new session. Ids must be distinct across the two maps.
-  // Throws InvalidInput, changing nothing, when the state is inconsistent or shares an id.
-  void merge(DetectorState state);
-  PreparedRestore prepareMerge(DetectorState state) const;  // reads this detector: hold its lock
-
-  // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
-  KeyframeIndex sessionStart() const { return session_start_; }
-  // The session new keyframes join: 0 at first, above every stored one after a load or merge
-  // (continue_session keeps the saved run's).
-  uint32_t session() const { return session_; }
-
-  // The width of the descriptors this detector stores and accepts, in bytes.
-  int descriptorBytes() const { return database_.descriptorBytes(); }
-  const FeatureExtractor& extractor() const { return *extractor_; }
-  size_t size() const { return records_.size(); }
-  const KeyframeDatabase& database() const { return database_; }
-  const TemporalFilter& filter() const { return *filter_; }
-  const KeyframeRecord& record(KeyframeIndex k) const { return records_[k]; }
-  std::optional<KeyframeIndex> find(uint64_t id) const;
-  Features features(KeyframeIndex k) const;
-  uint64_t nextId() const { return next_id_; }
-  size_t memoryBytes() const;
-
-  void reset();
-
- private:
-  void checkId(std::optional<uint64_t> id) const;
-  void checkWidth(const DetectorState& state) const;  // throws InvalidInput for another descriptor width
-  // Checks `state` and builds its database; session_start and session as given, the filter fresh
-  // or from the state.
-  PreparedRestore build(DetectorState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
-  KeyframeIndex eligibleCount(double stamp) const;
-  // Where this detector's own keyframe at `stamp` may find candidates (exclusion, near-past band).
-  MapScope ownScope(double stamp) const;
-  // Whether fitting candidate i (with `matches` descriptor matches) can change what is reported:
-  // false when even `matches` inliers would leave it below the decision probability and below a
-  // candidate already verified (verification/early_stop).
-  // The probability candidate c is published with, given verification v: the scorer's, through the
-  // verification gate (belowDecision) when v failed; the filter's when not verifying.
-  double publishedProbability(const LoopCandidate& c, const Verification& v) const;
-
- public:
   // The scorer's inputs of a candidate (CandidateScorer::Evidence).
   static CandidateScorer::Evidence evidenceOf(const LoopCandidate& c) {
     return {c.filter_probability, c.saliency, c.eligible_keyframes};
@@ -312,24 +222,27 @@ class LoopDetector {
   const CandidateScorer& scorer() const { return scorer_; }
 
  private:
+  // Throws InvalidInput, changing nothing, for features this map cannot take.
+  void checkFeatures(const Features& features) const;
+  // Where this detector's own keyframe at `stamp` may find candidates (exclusion, near-past band).
+  MapScope ownScope(double stamp) const;
+  // The probability candidate c is published with, given verification v: the scorer's, through the
+  // verification gate (belowDecision) when v failed; the filter's when not verifying.
+  double publishedProbability(const LoopCandidate& c, const Verification& v) const;
+  // Whether fitting candidate i (with `matches` descriptor matches) can change what is reported:
+  // false when even `matches` inliers would leave it below the decision probability and below a
+  // candidate already verified (verification/early_stop).
   bool fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
                     const std::vector<Verification>& earlier) const;
   // Verifies (when verifying) each candidate against the query, in the map it came from
   // (maps[i] for candidates[i]), then scores and judges it.
   void judge(std::vector<LoopCandidate>& candidates, const Features& query,
-             const std::vector<const LoopDetector*>& maps) const;
+             const std::vector<const KeyframeMap*>& maps) const;
 
   DetectorParams params_;
-  std::unique_ptr<FeatureExtractor> extractor_;
-  KeyframeDatabase database_;
-  std::unique_ptr<TemporalFilter> filter_;
+  KeyframeMap map_;
   CandidateScorer scorer_;
   std::unique_ptr<CandidateVerifier> verifier_;
-  std::vector<KeyframeRecord> records_;
-  std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
-  uint64_t next_id_ = 0;
-  KeyframeIndex session_start_ = 0;
-  uint32_t session_ = 0;
   uint64_t retunes_ = 0;
 };
 

@@ -38,20 +38,11 @@ class RobotTeam {
   const LoopDetector& robot(size_t robot) const { return *robots_.at(robot); }
   const DetectorParams& params() const { return robots_.front()->params(); }
 
-  // A keyframe of observation.robot, as LoopDetector::process (its image's features extracted by
-  // that robot's detector; features extracted ahead by extractFeatures report its extract_ms), with
-  // the other robots' maps asked too: result.query_robot = the robot,
+  // A keyframe of observation.robot (its features: images go through a FeatureFrontEnd first), as
+  // LoopDetector::process, with the other robots' maps asked too: result.query_robot = the robot,
   // each candidate's robot its map's, at most max_candidates in all. Throws InvalidInput (changing
   // nothing) for a robot out of range and whatever the robot's detector refuses.
   DetectionResult process(Observation observation);
-  // The same, for callers holding the parts.
-  DetectionResult process(size_t robot, Features features, double stamp, std::optional<uint64_t> id = std::nullopt) {
-    return process(Observation::ofFeatures(std::move(features), stamp, id, robot));
-  }
-  DetectionResult process(size_t robot, const cv::Mat& image, PixelFormat format, double stamp,
-                          std::optional<uint64_t> id = std::nullopt, const CameraIntrinsics& camera = {}) {
-    return process(Observation::ofImage(image, format, stamp, id, camera, robot));
-  }
 
   // After robot's map was replaced, reset or merged (a load, a reset): the pair filters that look
   // at it or from it start over from "no loop", since their hypotheses were its old keyframes.

@@ -3,12 +3,12 @@
 #include <cstdint>
 #include <string>
 
-#include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/io/database_directory.hpp"
+#include "mild_lcd/place/keyframe_map.hpp"
 
 namespace mild {
 
-// The detector's state in one file, for map reuse across runs.
+// A keyframe map in one file, for map reuse across runs.
 //
 // Layout (little-endian). Header, 32 bytes: magic "MILDLCD" + '\0', format version (u32), flags
 // (u32, 0), payload size (u64), CRC-32 of the payload (u32), CRC-32 of the 28 bytes before it
@@ -39,18 +39,18 @@ constexpr unsigned long long kDefaultMaxDatabaseBytes = 16ull << 30;
 
 // Throws IoError when the file cannot be written, InvalidInput when something other than a regular
 // file sits at the target; the previous file is kept either way.
-void saveDetector(const LoopDetector& detector, const ConfinedFile& file);
-void saveDetector(const LoopDetector& detector, const std::string& path);
+void saveMap(const KeyframeMap& map, const ConfinedFile& file);
+void saveMap(const KeyframeMap& map, const std::string& path);
 
 // Reads and checks a file: a regular file only (never a link, FIFO, device or folder); the header
 // (magic, version, payload size against the file's size) before anything else is read or
 // allocated; a file over max_bytes refused (CapacityError) unread; then checksums and every count
 // against the bytes that remain. Throws InvalidInput naming the file and the problem, IoError when
-// it cannot be read, CapacityError when it does not fit (max_bytes, memory); touches no detector.
-DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
-DetectorState readDetectorFile(const std::string& path, unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+// it cannot be read, CapacityError when it does not fit (max_bytes, memory); touches no map.
+MapState readMapFile(const ConfinedFile& file, unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+MapState readMapFile(const std::string& path, unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
 // The same on bytes in memory; `origin` names them in errors.
-DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin);
+MapState parseMapState(const uint8_t* data, size_t size, const std::string& origin);
 
 struct LoadReport {
   size_t keyframes = 0;
@@ -59,28 +59,28 @@ struct LoadReport {
   std::string message;  // one line, e.g. for a service reply; says which index parameters differed
 };
 
-// readDetectorFile, then LoopDetector::restore. On any error the detector is left as it was.
-LoadReport loadDetector(LoopDetector& detector, const ConfinedFile& file, bool continue_session,
-                        unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
-LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session);
+// readMapFile, then KeyframeMap::restore. On any error the map is left as it was.
+LoadReport loadMap(KeyframeMap& map, const ConfinedFile& file, bool continue_session,
+                   unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+LoadReport loadMap(KeyframeMap& map, const std::string& path, bool continue_session);
 
-// The same in two steps, for callers that must not hold a lock on the detector for the reading and
-// the index rebuild: prepareLoad touches nothing shared (only the detector's parameters, which never
-// change), commitLoad swaps the prepared state in and cannot fail.
+// The same in two steps, for callers that must not hold a lock on the map for the reading and the
+// index rebuild: prepareLoad touches nothing shared (only the map's parameters, which never change),
+// commitLoad swaps the prepared state in and cannot fail.
 struct PreparedLoad {
   PreparedRestore restore;
   LoadReport report;
 };
-PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,
                          unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
-void commitLoad(LoopDetector& detector, PreparedLoad&& prepared);
+void commitLoad(KeyframeMap& map, PreparedLoad&& prepared);
 
-// LoopDetector::merge of a state read from a file (`origin` names it in errors and the report).
-// The caller holds whatever lock guards the detector: merging reads it and rebuilds its index.
-LoadReport mergeState(LoopDetector& detector, DetectorState state, const std::string& origin);
-// readDetectorFile, then mergeState. On any error the detector is left as it was.
-LoadReport mergeDetector(LoopDetector& detector, const ConfinedFile& file,
-                         unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
-LoadReport mergeDetector(LoopDetector& detector, const std::string& path);
+// KeyframeMap::merge of a state read from a file (`origin` names it in errors and the report).
+// The caller holds whatever lock guards the map: merging reads it and rebuilds its index.
+LoadReport mergeState(KeyframeMap& map, MapState state, const std::string& origin);
+// readMapFile, then mergeState. On any error the map is left as it was.
+LoadReport mergeMap(KeyframeMap& map, const ConfinedFile& file,
+                    unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+LoadReport mergeMap(KeyframeMap& map, const std::string& path);
 
 }  // namespace mild

@@ -6,14 +6,16 @@
 // Every keyframe that arrives is answered, or counted: dropped (queue full), rejected (unusable,
 // or over its size bounds, judged as it is pushed), or discarded (reset, shutdown).
 //
+// The worker owns the one feature front-end (mild::FeatureFrontEnd) that turns images into
+// features: the detector takes features only, so an image is extracted once, never under the lock.
 // Two stages, on two threads when `extraction_thread` (~extraction_thread): stage 1 decodes the
-// next keyframe and extracts its features (mild::extractFeatures) without the detector lock while
+// next keyframe and extracts its features without the detector lock while
 // stage 2 queries, filters, verifies and inserts the previous one under the lock, then publishes.
 // One keyframe at most waits between them (the hand-off), and stage 1 pops the next only once the
 // hand-off is empty: besides what the queue's bounds allow, at most two keyframes are held, one per
 // stage. Answers keep the arrival order: stage 2 takes keyframes, refused ones included, in the
-// order stage 1 popped them. Without it, one thread decodes a keyframe, then the detector extracts
-// and processes it under the lock, as before.
+// order stage 1 popped them. Without it, one thread decodes and extracts a keyframe, then takes the
+// lock for the detector.
 
 #include <atomic>
 #include <chrono>
@@ -26,7 +28,7 @@
 #include <string>
 #include <thread>
 
-#include "mild_lcd/features/feature_extractor.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/ros/bounded_queue.hpp"
 #include "mild_lcd/ros/conversions.hpp"
 #include "mild_lcd/ros/keyframe_input.hpp"
@@ -72,8 +74,8 @@ class KeyframeWorker {
                  bool extraction_thread = true);
   ~KeyframeWorker();
 
-  // Starts the thread(s). With the extraction thread, the team must exist: its extractor is built
-  // from the team's features/ parameters here.
+  // Starts the thread(s). The team must exist: the front-end is built from its features/ parameters
+  // here.
   void start();
   enum class Pushed { kQueued, kDroppedOldest, kRejected };
   // From any thread; never waits for the detector. A message over its size bounds (InputLimits, or
@@ -97,7 +99,7 @@ class KeyframeWorker {
 
  private:
   // A keyframe through stage 1: its message (decoded images may point into it), the decoded image,
-  // and its observation, features extracted when stage 1 extracts; or why it is refused.
+  // and its observation with its features; or why it is refused.
   struct Staged {
     KeyframeInputPtr input;
     std_msgs::Header header;
@@ -110,8 +112,8 @@ class KeyframeWorker {
   void runExtraction();  // stage 1, on extraction_thread_
   void runDetector();    // stage 2
   void startup();
-  // Stage 1: decodes; with `extractor`, extracts too.
-  Staged stage(KeyframeInputPtr input, const mild::FeatureExtractor* extractor) const;
+  // Stage 1: decodes and extracts.
+  Staged stage(KeyframeInputPtr input) const;
   // Stage 2: the detector, under its lock, then publishing.
   void process(Staged staged);
   void reject(const std_msgs::Header& header, const std::string& why);
@@ -126,9 +128,8 @@ class KeyframeWorker {
   std::thread extraction_thread_;  // stage 1
   std::atomic<size_t> discarded_{0};
 
-  // Stage 1's own extractor (extractors are not thread-safe) and the database's width.
-  std::unique_ptr<mild::FeatureExtractor> extractor_;
-  int descriptor_bytes_ = 0;
+  // The worker's feature front-end, used by stage 1 only (extractors are not thread-safe).
+  std::unique_ptr<mild::FeatureFrontEnd> front_end_;
 
   mutable std::mutex handoff_mutex_;
   std::condition_variable handoff_changed_;

@@ -43,7 +43,7 @@ std::vector<size_t> RobotTeam::mapsAskedNext(size_t robot) const {
   // In turn: the robot's n-th keyframe asks the other maps n * asked, n * asked + 1, ... (mod their
   // number), so that each is asked equally often and at regular intervals, which the pair filter's
   // motion model (a revisit moves along the other map by a bounded step per query) tolerates.
-  const size_t first = asked == n_others ? 0 : (robots_[robot]->size() * asked) % n_others;
+  const size_t first = asked == n_others ? 0 : (robots_[robot]->map().size() * asked) % n_others;
   std::vector<size_t> maps;
   for (size_t j = 0; j < asked; ++j) {
     size_t other = (first + j) % n_others;
@@ -56,7 +56,7 @@ std::vector<size_t> RobotTeam::mapsAskedNext(size_t robot) const {
 std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
   std::vector<OtherMap> others;
   for (size_t other : mapsAskedNext(robot)) {
-    others.push_back({robots_[other].get(), &pairFilter(robot, other), static_cast<uint32_t>(other)});
+    others.push_back({&robots_[other]->map(), &pairFilter(robot, other), static_cast<uint32_t>(other)});
   }
   return others;
 }
@@ -64,15 +64,7 @@ std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
 DetectionResult RobotTeam::process(Observation observation) {
   const size_t robot = observation.robot;
   const std::vector<OtherMap> others = otherMaps(robot);
-  LoopDetector& detector = *robots_[robot];
-  if (observation.image) {
-    return detector.process(observation.image->pixels, observation.image->format, observation.stamp, observation.id,
-                            observation.features.camera, others, static_cast<uint32_t>(robot));
-  }
-  DetectionResult result = detector.process(std::move(observation.features), observation.stamp, observation.id, others,
-                                            static_cast<uint32_t>(robot));
-  result.stats.extract_ms = observation.extract_ms;  // extracted ahead (extractFeatures), or 0
-  return result;
+  return robots_[robot]->process(std::move(observation), others, static_cast<uint32_t>(robot));
 }
 
 void RobotTeam::mapChanged(size_t robot) {
@@ -84,7 +76,7 @@ void RobotTeam::mapChanged(size_t robot) {
 }
 
 void RobotTeam::reset() {
-  for (auto& r : robots_) r->reset();
+  for (auto& r : robots_) r->map().reset();
   for (auto& f : pair_filters_) {
     if (f) f->reset();
   }
@@ -97,19 +89,19 @@ void RobotTeam::retune(const DetectorParams& next) {
 
 size_t RobotTeam::keyframes() const {
   size_t n = 0;
-  for (const auto& r : robots_) n += r->size();
+  for (const auto& r : robots_) n += r->map().size();
   return n;
 }
 
 size_t RobotTeam::features() const {
   size_t n = 0;
-  for (const auto& r : robots_) n += r->database().featureCount();
+  for (const auto& r : robots_) n += r->map().database().featureCount();
   return n;
 }
 
 size_t RobotTeam::memoryBytes() const {
   size_t n = 0;
-  for (const auto& r : robots_) n += r->memoryBytes();
+  for (const auto& r : robots_) n += r->map().memoryBytes();
   return n;
 }
 

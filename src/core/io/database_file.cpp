@@ -18,8 +18,8 @@
 #include <sstream>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/filter/filter_state.hpp"
+#include "mild_lcd/params/parameter_source.hpp"
 
 namespace mild {
 namespace {
@@ -89,18 +89,17 @@ class PayloadWriter {
   uint32_t crc_ = static_cast<uint32_t>(crc32(0, nullptr, 0));
 };
 
-void writePayload(const LoopDetector& detector, PayloadWriter& w) {
-  std::string parameters;
-  for (const auto& [name, value] : describeParameters(detector.params())) parameters += name + ": " + value + "\n";
+void writePayload(const KeyframeMap& map, PayloadWriter& w) {
+  const std::string& parameters = map.builderParameters();
   w.put(static_cast<uint32_t>(parameters.size()));
   w.putBytes(parameters.data(), parameters.size());
-  const int bytes = detector.descriptorBytes();
+  const int bytes = map.descriptorBytes();
   w.put(static_cast<uint32_t>(bytes * 8));
-  w.put(detector.nextId());
-  w.put(static_cast<uint32_t>(detector.sessionStart()));
-  w.put(static_cast<uint32_t>(detector.size()));
-  for (KeyframeIndex k = 0; k < detector.size(); ++k) {
-    const KeyframeRecord& r = detector.record(k);
+  w.put(map.nextId());
+  w.put(static_cast<uint32_t>(map.sessionStart()));
+  w.put(static_cast<uint32_t>(map.size()));
+  for (KeyframeIndex k = 0; k < map.size(); ++k) {
+    const KeyframeRecord& r = map.record(k);
     w.put(r.id);
     w.put(r.stamp);
     w.put(r.session);
@@ -117,13 +116,12 @@ void writePayload(const LoopDetector& detector, PayloadWriter& w) {
       w.put(p.response);
       w.put(static_cast<int32_t>(p.octave));
     }
-    for (const Descriptor& d : detector.database().descriptors(k))
-      w.putBytes(d.words.data(), static_cast<size_t>(bytes));
+    for (const Descriptor& d : map.database().descriptors(k)) w.putBytes(d.words.data(), static_cast<size_t>(bytes));
   }
-  const std::string filter = detector.filter().name();
+  const std::string filter = map.filter().name();
   w.put(static_cast<uint32_t>(filter.size()));
   w.putBytes(filter.data(), filter.size());
-  const std::vector<uint8_t> filter_state = detector.filter().saveState();
+  const std::vector<uint8_t> filter_state = map.filter().saveState();
   w.put(static_cast<uint64_t>(filter_state.size()));
   w.putBytes(filter_state.data(), filter_state.size());
   w.flush();
@@ -256,9 +254,9 @@ void writeAll(int fd, const std::vector<uint8_t>& bytes, off_t offset, const std
 
 }  // namespace
 
-void saveDetector(const LoopDetector& detector, const std::string& path) { saveDetector(detector, fileAtPath(path)); }
+void saveMap(const KeyframeMap& map, const std::string& path) { saveMap(map, fileAtPath(path)); }
 
-void saveDetector(const LoopDetector& detector, const ConfinedFile& file) {
+void saveMap(const KeyframeMap& map, const ConfinedFile& file) {
   file.refuseIfNotRegular();
   removeStaleTemporaries(file);
   std::string tmp;
@@ -268,7 +266,7 @@ void saveDetector(const LoopDetector& detector, const ConfinedFile& file) {
     writeAll(fd, header, 0, file.display());
     if (::lseek(fd, static_cast<off_t>(kHeaderBytes), SEEK_SET) < 0) throw IoError(file.display() + ": cannot seek");
     PayloadWriter writer(fd, file.display());
-    writePayload(detector, writer);
+    writePayload(map, writer);
 
     header.clear();
     header.insert(header.end(), kMagic, kMagic + sizeof(kMagic));
@@ -375,7 +373,7 @@ void readKeyframe(Cursor& in, uint32_t version, int descriptor_width, const std:
   descriptors = descriptorsFromBytes(bytes, features * descriptor_bytes, descriptor_width);
 }
 
-void readFilterState(Cursor& in, uint32_t version, const std::string& origin, DetectorState& state) {
+void readFilterState(Cursor& in, uint32_t version, const std::string& origin, MapState& state) {
   if (version == 1) {
     // Version 1 held the exclusive-hypothesis filter's posterior and no-loop probability, without
     // the count: that filter's state (filter_state.hpp) once the count is put in front.
@@ -400,11 +398,11 @@ void readFilterState(Cursor& in, uint32_t version, const std::string& origin, De
 
 }  // namespace
 
-DetectorState parseDetectorState(const uint8_t* data, size_t size, const std::string& origin) {
+MapState parseMapState(const uint8_t* data, size_t size, const std::string& origin) {
   const CheckedPayload payload = checkedPayload(data, size, origin);
   const uint32_t version = payload.version;
   Cursor in(payload.data, payload.size, origin);
-  DetectorState state;
+  MapState state;
   const size_t text = in.count(1, "the parameters");
   const uint8_t* chars = in.take(text, "the parameters");
   state.parameters.assign(reinterpret_cast<const char*>(chars), text);
@@ -450,11 +448,11 @@ struct FdCloser {
 
 }  // namespace
 
-DetectorState readDetectorFile(const std::string& path, unsigned long long max_bytes) {
-  return readDetectorFile(fileAtPath(path), max_bytes);
+MapState readMapFile(const std::string& path, unsigned long long max_bytes) {
+  return readMapFile(fileAtPath(path), max_bytes);
 }
 
-DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_bytes) {
+MapState readMapFile(const ConfinedFile& file, unsigned long long max_bytes) {
   unsigned long long size = 0;
   const FdCloser fd{file.openForReading(size)};
   const std::string& origin = file.display();
@@ -481,35 +479,33 @@ DetectorState readDetectorFile(const ConfinedFile& file, unsigned long long max_
     std::memcpy(bytes.data(), header.data(), kHeaderBytes);
     readExactly(fd.fd, bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes, static_cast<off_t>(kHeaderBytes),
                 origin);
-    return parseDetectorState(bytes.data(), bytes.size(), origin);
+    return parseMapState(bytes.data(), bytes.size(), origin);
   } catch (const std::bad_alloc&) {
     throw CapacityError(origin + ": not enough memory to load a database of " + std::to_string(size >> 20) + " MB");
   }
 }
 
-PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file, bool continue_session,
+PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,
                          unsigned long long max_bytes) {
   const auto start = std::chrono::steady_clock::now();
-  DetectorState state = readDetectorFile(file, max_bytes);
+  MapState state = readMapFile(file, max_bytes);
   LoadReport report;
   report.keyframes = state.records.size();
   for (const auto& d : state.descriptors) report.features += d.size();
 
-  // The index is rebuilt with this detector's parameters; say so when the file's differ.
+  // The index is rebuilt with this map's parameters; say so when the file's differ.
   const auto saved = parameterLines(state.parameters);
   std::string differing;
-  // Only the index parameters are read: the others may be retuned meanwhile (LoopDetector::retune).
-  DetectorParams index_only;
-  index_only.database.index = detector.params().database.index;
-  for (const auto& [name, value] : describeParameters(index_only, MihParams::kSection)) {
+  visitSection(map.databaseParams().index, [&](const std::string& name, const auto& field, const Bounds&, const char*) {
+    const std::string value = parameterText(field);
     auto it = saved.find(name);
     if (it != saved.end() && it->second != value) {
       differing += (differing.empty() ? "" : ", ") + name + " " + it->second + " -> " + value;
     }
-  }
+  });
   std::optional<PreparedRestore> restore;
   try {
-    restore.emplace(detector.prepareRestore(std::move(state), continue_session));
+    restore.emplace(map.prepareRestore(std::move(state), continue_session));
   } catch (const InvalidInput& e) {
     throw InvalidInput(file.display() + ": " + e.what());
   } catch (const std::bad_alloc&) {
@@ -527,30 +523,27 @@ PreparedLoad prepareLoad(const LoopDetector& detector, const ConfinedFile& file,
   return PreparedLoad{std::move(*restore), std::move(report)};
 }
 
-void commitLoad(LoopDetector& detector, PreparedLoad&& prepared) {
-  detector.commitRestore(std::move(prepared.restore));
-}
+void commitLoad(KeyframeMap& map, PreparedLoad&& prepared) { map.commitRestore(std::move(prepared.restore)); }
 
-LoadReport loadDetector(LoopDetector& detector, const ConfinedFile& file, bool continue_session,
-                        unsigned long long max_bytes) {
-  PreparedLoad prepared = prepareLoad(detector, file, continue_session, max_bytes);
+LoadReport loadMap(KeyframeMap& map, const ConfinedFile& file, bool continue_session, unsigned long long max_bytes) {
+  PreparedLoad prepared = prepareLoad(map, file, continue_session, max_bytes);
   LoadReport report = prepared.report;
-  commitLoad(detector, std::move(prepared));
+  commitLoad(map, std::move(prepared));
   return report;
 }
 
-LoadReport loadDetector(LoopDetector& detector, const std::string& path, bool continue_session) {
-  return loadDetector(detector, fileAtPath(path), continue_session);
+LoadReport loadMap(KeyframeMap& map, const std::string& path, bool continue_session) {
+  return loadMap(map, fileAtPath(path), continue_session);
 }
 
-LoadReport mergeState(LoopDetector& detector, DetectorState state, const std::string& origin) {
+LoadReport mergeState(KeyframeMap& map, MapState state, const std::string& origin) {
   const auto start = std::chrono::steady_clock::now();
   LoadReport report;
   report.keyframes = state.records.size();
   for (const auto& d : state.descriptors) report.features += d.size();
-  const size_t before = detector.size();
+  const size_t before = map.size();
   try {
-    detector.merge(std::move(state));
+    map.merge(std::move(state));
   } catch (const InvalidInput& e) {
     throw InvalidInput(origin + ": " + e.what());
   } catch (const std::bad_alloc&) {
@@ -560,18 +553,16 @@ LoadReport mergeState(LoopDetector& detector, DetectorState state, const std::st
   std::ostringstream msg;
   msg.precision(3);
   msg << "merged " << report.keyframes << " keyframes (" << report.features << " features) from " << origin
-      << " into the running map of " << before << " in " << report.seconds << " s; it now holds " << detector.size()
-      << " keyframes, new ones join session " << detector.session();
+      << " into the running map of " << before << " in " << report.seconds << " s; it now holds " << map.size()
+      << " keyframes, new ones join session " << map.session();
   report.message = msg.str();
   return report;
 }
 
-LoadReport mergeDetector(LoopDetector& detector, const ConfinedFile& file, unsigned long long max_bytes) {
-  return mergeState(detector, readDetectorFile(file, max_bytes), file.display());
+LoadReport mergeMap(KeyframeMap& map, const ConfinedFile& file, unsigned long long max_bytes) {
+  return mergeState(map, readMapFile(file, max_bytes), file.display());
 }
 
-LoadReport mergeDetector(LoopDetector& detector, const std::string& path) {
-  return mergeDetector(detector, fileAtPath(path));
-}
+LoadReport mergeMap(KeyframeMap& map, const std::string& path) { return mergeMap(map, fileAtPath(path)); }
 
 }  // namespace mild

@@ -10,6 +10,7 @@
 #include <mild_lcd/LoopClosure.h>
 #include <mild_lcd/backend/pose_graph.hpp>
 #include <mild_lcd/detector/loop_detector.hpp>
+#include <mild_lcd/detector/process_image.hpp>
 
 int main() {
   // The detector: two textured frames, the second a shifted copy of the first.
@@ -18,9 +19,9 @@ int main() {
   rng.fill(image, cv::RNG::UNIFORM, 0, 255);
   cv::GaussianBlur(image, image, cv::Size(5, 5), 1.5);
   mild::LoopDetector detector;
-  detector.process(image, mild::PixelFormat::kGray, 0.0);
-  const mild::DetectionResult second = detector.process(image, mild::PixelFormat::kGray, 0.1);
-  if (detector.size() != 2 || second.stats.features == 0) {
+  mild::processImage(detector, image, mild::PixelFormat::kGray, 0.0);
+  const mild::DetectionResult second = mild::processImage(detector, image, mild::PixelFormat::kGray, 0.1);
+  if (detector.map().size() != 2 || second.stats.features == 0) {
     std::cerr << "downstream: the detector did not store both keyframes\n";
     return 1;
   }
@@ -59,7 +60,7 @@ int main() {
     std::cerr << "downstream: the loop did not correct the heading (" << yaw << ")\n";
     return 1;
   }
-  std::cout << "downstream: ok (" << detector.size() << " keyframes, " << closure.candidates.size()
+  std::cout << "downstream: ok (" << detector.map().size() << " keyframes, " << closure.candidates.size()
             << " candidate, heading " << yaw << " rad after the loop)\n";
   return 0;
 }

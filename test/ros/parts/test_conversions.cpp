@@ -137,8 +137,8 @@ TEST(Conversions, AnEmptyKeyframeCarriesItsDeclaredWidth) {
   EXPECT_EQ(featuresFromMsg(kf).declared_bytes, 32) << "0 means 32";
   kf.descriptor_bytes = 64;
   mild::LoopDetector orb;
-  EXPECT_THROW(orb.process(featuresFromMsg(kf), 1.0), mild::InvalidInput);
-  EXPECT_EQ(orb.size(), 0u);
+  EXPECT_THROW(orb.process(mild::Observation::ofFeatures(featuresFromMsg(kf), 1.0)), mild::InvalidInput);
+  EXPECT_EQ(orb.map().size(), 0u);
 }
 
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {
@@ -207,8 +207,8 @@ TEST(Conversions, AKeyframesCameraInfoAndDepthsReachTheCore) {
 
   msg.depths.push_back(2.0f);  // three depths for two keypoints: refused by the detector, unchanged
   mild::LoopDetector detector;
-  EXPECT_THROW(detector.process(featuresFromMsg(msg), 1.0), mild::InvalidInput);
-  EXPECT_EQ(detector.size(), 0u);
+  EXPECT_THROW(detector.process(mild::Observation::ofFeatures(featuresFromMsg(msg), 1.0)), mild::InvalidInput);
+  EXPECT_EQ(detector.map().size(), 0u);
   msg.depths.clear();
   msg.camera_info.K = {};  // all zero: unknown, not an error
   EXPECT_FALSE(featuresFromMsg(msg).camera.known());

@@ -24,7 +24,7 @@ class Store : public mild::test::ScratchFolderTest {
         f.descriptors.push_back(desc);
         f.keypoints.emplace_back(1.0f * i, 1.0f * k, 7.0f);
       }
-      d->process(std::move(f), 1.0 * k);
+      d->process(mild::Observation::ofFeatures(std::move(f), 1.0 * k));
     }
     return d;
   }
@@ -38,7 +38,7 @@ class Store : public mild::test::ScratchFolderTest {
 TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
   SharedDetector original;
   original.setTeam(std::make_unique<mild::RobotTeam>(detector(120)));
-  mild::saveDetector(original.robot(0), (dir_ / "map.db").string());
+  mild::saveMap(original.robot(0).map(), (dir_ / "map.db").string());
   const auto size = fs::file_size(dir_ / "map.db");
   ASSERT_GT(size, 1u << 20);
 
@@ -53,12 +53,12 @@ TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
   EXPECT_NE(store.saveOnShutdown(running).find("not saving"), std::string::npos);
   EXPECT_THROW(store.save(running, ""), mild::InvalidInput) << "nor through the service";
   // Merging into the empty stand-in would let a later save replace the map that failed.
-  mild::saveDetector(*detector(2), (dir_ / "small.db").string());
+  mild::saveMap(detector(2)->map(), (dir_ / "small.db").string());
   const std::string merge_error = errorOf([&] { store.merge(running, "small.db"); });
   EXPECT_NE(merge_error.find("without merge replaces it"), std::string::npos) << merge_error;
-  EXPECT_EQ(running.robot(0).size(), 0u);
+  EXPECT_EQ(running.robot(0).map().size(), 0u);
   EXPECT_EQ(fs::file_size(dir_ / "map.db"), size) << "the map is untouched";
-  EXPECT_EQ(mild::readDetectorFile((dir_ / "map.db").string()).records.size(), 120u);
+  EXPECT_EQ(mild::readMapFile((dir_ / "map.db").string()).records.size(), 120u);
 }
 
 TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
@@ -67,7 +67,7 @@ TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
   running.setTeam(std::make_unique<mild::RobotTeam>(detector(3)));
   EXPECT_NE(store.loadOnStart(running).find("does not exist yet"), std::string::npos);
   EXPECT_NE(store.saveOnShutdown(running).find("saved 3 keyframes"), std::string::npos);
-  EXPECT_EQ(mild::readDetectorFile((dir_ / "new.db").string()).records.size(), 3u);
+  EXPECT_EQ(mild::readMapFile((dir_ / "new.db").string()).records.size(), 3u);
 }
 
 // ~autosave_period: with save_on_shutdown, the map is written when it changed since it was last
@@ -80,7 +80,7 @@ TEST_F(Store, AutosaveWritesTheMapOnlyWhenItChanged) {
   EXPECT_FALSE(fs::exists(dir_ / "auto.db"));
   ++shared.changes;  // as the worker does after each keyframe
   EXPECT_NE(store.autosave(shared).find("saved 3 keyframes"), std::string::npos);
-  EXPECT_EQ(mild::readDetectorFile((dir_ / "auto.db").string()).records.size(), 3u);
+  EXPECT_EQ(mild::readMapFile((dir_ / "auto.db").string()).records.size(), 3u);
   EXPECT_EQ(store.autosave(shared), "") << "unchanged since";
   ++shared.changes;
   store.save(shared, "auto.db");  // the service, to ~database_path
@@ -107,7 +107,7 @@ TEST_F(Store, ServicesSaveAndLoadInsideTheFolderOnly) {
   SharedDetector other;
   other.setTeam(std::make_unique<mild::RobotTeam>(detector(0)));
   EXPECT_EQ(store.load(other, (dir_ / "robot/one.db").string(), false).keyframes, 4u);
-  EXPECT_EQ(other.robot(0).size(), 4u);
+  EXPECT_EQ(other.robot(0).map().size(), 4u);
   EXPECT_THROW(DatabaseStore(settings("database_path: /etc/passwd\n")), mild::InvalidInput)
       << "~database_path outside ~database_dir stops the node at start-up";
 }

@@ -1,0 +1,149 @@
+#pragma once
+
+// The keyframe map: what a detector has learnt, apart from how it judges a query. It holds the
+// MIH database of every stored keyframe's descriptors, the keyframes' records (id, stamp, session,
+// keypoints, camera), the id lookup, the sessions, and the temporal filter's belief over these
+// keyframes (a belief is about one map's entries: it is saved, restored and reset with them).
+// Persistence (io/database_file.hpp) and a robot team's other maps (detector/robot_team.hpp)
+// depend on the map alone; the pipeline that queries it, filters, verifies and scores
+// (detector/loop_detector.hpp) runs over it, as DBoW2's detector runs over its database.
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "mild_lcd/features/features.hpp"
+#include "mild_lcd/filter/filters.hpp"
+#include "mild_lcd/place/keyframe_database.hpp"
+
+namespace mild {
+
+// A stored keyframe, as handed to verifiers and clients (e.g. the sparse-match service).
+struct KeyframeRecord {
+  uint64_t id = 0;
+  double stamp = 0.0;
+  uint32_t session = 0;
+  std::vector<cv::KeyPoint> keypoints;
+  CameraIntrinsics camera;  // unknown unless the keyframe brought them
+};
+
+// Everything a map holds, as plain data: what database_file.hpp saves and loads.
+struct MapState {
+  std::string parameters;                      // "name: value" lines of the detector that saved it
+  int descriptor_bytes = kOrbDescriptorBytes;  // the width of every descriptor below
+  uint64_t next_id = 0;
+  KeyframeIndex session_start = 0;
+  std::vector<KeyframeRecord> records;      // in database order
+  std::vector<DescriptorList> descriptors;  // one list per record, one descriptor per keypoint
+  std::string filter_name;                  // TemporalFilter::name() of the filter that saved it
+  std::vector<uint8_t> filter_state;        // its saveState()
+};
+
+// A state checked and turned into a ready database and filter, waiting to replace a map's.
+struct PreparedRestore {
+  KeyframeDatabase database;
+  std::unique_ptr<TemporalFilter> filter;
+  std::vector<KeyframeRecord> records;
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id;
+  uint64_t next_id = 0;
+  KeyframeIndex session_start = 0;
+  uint32_t session = 0;  // the session new keyframes join
+};
+
+// Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
+constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
+
+class KeyframeMap {
+ public:
+  // `database` at the descriptors' width; `descriptor_name` (features/type) names that width in
+  // errors. Throws InvalidInput for invalid parameters.
+  KeyframeMap(const DatabaseParams& database, const FilterParams& filter, std::string descriptor_name);
+
+  // --- Reading -----------------------------------------------------------------------------------
+  size_t size() const { return records_.size(); }
+  // The width of the descriptors this map stores and accepts, in bytes.
+  int descriptorBytes() const { return database_.descriptorBytes(); }
+  const DatabaseParams& databaseParams() const { return database_params_; }
+  const KeyframeDatabase& database() const { return database_; }
+  const TemporalFilter& filter() const { return *filter_; }
+  const KeyframeRecord& record(KeyframeIndex k) const { return records_[k]; }
+  std::optional<KeyframeIndex> find(uint64_t id) const;
+  Features features(KeyframeIndex k) const;
+  uint64_t nextId() const { return next_id_; }
+  // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
+  KeyframeIndex sessionStart() const { return session_start_; }
+  // The session new keyframes join: 0 at first, above every stored one after a load or merge
+  // (continue_session keeps the saved run's).
+  uint32_t session() const { return session_; }
+  size_t memoryBytes() const;
+  // The parameters of the detector that builds this map, as "name: value" lines: saved with it, so
+  // that a load can say which of them differ.
+  const std::string& builderParameters() const { return builder_parameters_; }
+  void setBuilderParameters(std::string lines) { builder_parameters_ = std::move(lines); }
+
+  // The keyframes [0, eligibleCount) a keyframe stamped `stamp`, about to be stored, may find as
+  // candidates: those at least exclusion_frames keyframes (and, when exclusion_seconds > 0, that
+  // many seconds) older; earlier sessions always.
+  KeyframeIndex eligibleCount(double stamp, int exclusion_frames, double exclusion_seconds) const;
+
+  // --- Growing -----------------------------------------------------------------------------------
+  // Throws InvalidInput for an id in use or above kMaxKeyframeId; CapacityError when no id is given
+  // and none is left to assign.
+  void checkId(std::optional<uint64_t> id) const;
+  // Throws CapacityError when `descriptors` would not fit the database.
+  void checkRoomFor(const DescriptorList& descriptors) const { database_.checkRoomFor(descriptors); }
+  // The temporal filter the pipeline updates with each of this map's own keyframes.
+  TemporalFilter& filter() { return *filter_; }
+  // Stores a keyframe whose id was checked (checkId) and whose descriptors fit (checkRoomFor);
+  // returns its index. Cannot fail for a checked keyframe.
+  KeyframeIndex add(uint64_t id, double stamp, std::vector<cv::KeyPoint> keypoints, const DescriptorList& descriptors,
+                    const CameraIntrinsics& camera);
+
+  // --- Replacing ---------------------------------------------------------------------------------
+  void reset();
+  // Replaces everything the map holds by `state` (the index is rebuilt from the descriptors with
+  // this map's parameters). continue_session = true resumes exactly where the saved run stopped:
+  // the same outputs as if it had never stopped (it needs the state of a filter of this map's
+  // filter/type). false starts a new session on the stored map (e.g. yesterday's): the loaded
+  // keyframes are exempt from the temporal exclusion, since they were not seen a moment ago, and
+  // the filter starts from "no loop". Throws InvalidInput, changing nothing, when the state is
+  // inconsistent.
+  void restore(MapState state, bool continue_session);
+  // restore() in two steps: prepareRestore reads only the map's parameters (fixed at
+  // construction), so it may run without the caller's lock; commitRestore cannot fail.
+  PreparedRestore prepareRestore(MapState state, bool continue_session) const;
+  void commitRestore(PreparedRestore&& prepared);
+  // Adds the keyframes of a saved map (yesterday's, another robot's) to this one, keeping both: they
+  // become earlier sessions (their session numbers shifted above every number in use here), always
+  // eligible as candidates, while the running session goes on. The index is rebuilt (the running
+  // session's keyframes stay last, so the temporal exclusion still reads a prefix) and the filter
+  // restarts from "no loop", as for a new session. Ids must be distinct across the two maps.
+  // Throws InvalidInput, changing nothing, when the state is inconsistent or shares an id.
+  void merge(MapState state);
+  PreparedRestore prepareMerge(MapState state) const;  // reads this map: hold its lock
+
+ private:
+  void checkWidth(const MapState& state) const;  // throws InvalidInput for another descriptor width
+  // Checks `state` and builds its database; session_start and session as given, the filter fresh
+  // or from the state.
+  PreparedRestore build(MapState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
+
+  DatabaseParams database_params_;
+  FilterParams filter_params_;
+  std::string descriptor_name_;
+  std::string builder_parameters_;
+  KeyframeDatabase database_;
+  std::unique_ptr<TemporalFilter> filter_;
+  std::vector<KeyframeRecord> records_;
+  std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
+  uint64_t next_id_ = 0;
+  KeyframeIndex session_start_ = 0;
+  uint32_t session_ = 0;
+};
+
+}  // namespace mild
