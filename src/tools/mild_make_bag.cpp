@@ -35,7 +35,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
-#include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/messages/message_conversions.hpp"
 
 namespace {
 

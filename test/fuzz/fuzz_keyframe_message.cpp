@@ -9,7 +9,9 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/detector/process_image.hpp"
-#include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/input/image_decoding.hpp"
+#include "mild_lcd/ros/input/input_admission.hpp"
+#include "mild_lcd/ros/messages/message_conversions.hpp"
 
 namespace {
 

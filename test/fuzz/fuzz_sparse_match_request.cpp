@@ -5,7 +5,7 @@
 
 #include <random>
 
-#include "mild_lcd/ros/conversions.hpp"
+#include "mild_lcd/ros/services/sparse_match_service.hpp"
 
 namespace {
 

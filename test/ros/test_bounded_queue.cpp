@@ -4,7 +4,7 @@
 #include <thread>
 #include <vector>
 
-#include "mild_lcd/ros/bounded_queue.hpp"
+#include "mild_lcd/ros/detection/bounded_queue.hpp"
 
 namespace mild {
 namespace {

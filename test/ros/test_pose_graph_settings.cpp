@@ -1,5 +1,5 @@
 // The example back-end's settings (mild_lcd/PoseGraphNodelet, mild_lcd_pose_graph_node): declared once
-// (src/ros/pose_graph_settings.cpp and PoseGraphParams::declare), loaded type-checked and bounded,
+// (src/ros/settings/pose_graph_settings.cpp and PoseGraphParams::declare), loaded type-checked and bounded,
 // unknown names refused naming them; docs/pose_graph.md's table is that declaration.
 
 #include <fstream>
@@ -11,7 +11,7 @@
 
 #include "../core/error_text.hpp"
 #include "mild_lcd/params/parameter_source.hpp"
-#include "mild_lcd/ros/pose_graph_settings.hpp"
+#include "mild_lcd/ros/settings/pose_graph_settings.hpp"
 
 namespace mild_lcd {
 namespace {

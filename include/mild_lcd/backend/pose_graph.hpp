@@ -2,7 +2,7 @@
 
 // An example back-end that consumes mild_lcd's loop closures: a planar (SE(2)) pose graph of the
 // keyframes, odometry edges between consecutive keyframes and loop edges from LoopClosure
-// candidates, solved with Ceres. ROS-free; the pose-graph nodelet (src/ros/pose_graph_nodelet.cpp)
+// candidates, solved with Ceres. ROS-free; the pose-graph nodelet (src/ros/nodelets/pose_graph_nodelet.cpp)
 // only feeds it. An example of consuming the interface, not a SLAM system: no map, no re-localisation,
 // one trajectory.
 //

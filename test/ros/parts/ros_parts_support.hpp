@@ -31,13 +31,16 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/io/database_file.hpp"
-#include "mild_lcd/ros/conversions.hpp"
-#include "mild_lcd/ros/database_store.hpp"
-#include "mild_lcd/ros/debug_image.hpp"
-#include "mild_lcd/ros/keyframe_worker.hpp"
-#include "mild_lcd/ros/node_settings.hpp"
-#include "mild_lcd/ros/periodic_task.hpp"
-#include "mild_lcd/ros/tuning_config.hpp"
+#include "mild_lcd/ros/detection/database_store.hpp"
+#include "mild_lcd/ros/detection/keyframe_worker.hpp"
+#include "mild_lcd/ros/detection/periodic_task.hpp"
+#include "mild_lcd/ros/input/image_decoding.hpp"
+#include "mild_lcd/ros/input/input_admission.hpp"
+#include "mild_lcd/ros/messages/message_conversions.hpp"
+#include "mild_lcd/ros/output/debug_image.hpp"
+#include "mild_lcd/ros/services/sparse_match_service.hpp"
+#include "mild_lcd/ros/settings/node_settings.hpp"
+#include "mild_lcd/ros/settings/tuning_config.hpp"
 
 namespace mild_lcd::ros_parts_test {
 

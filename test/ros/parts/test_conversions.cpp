@@ -1,4 +1,6 @@
-// test_ros_parts: message admission and conversion (ros/conversions.hpp): compressed-image headers, input bounds,
+// test_ros_parts: message admission and conversion (ros/input/input_admission.hpp,
+// ros/input/image_decoding.hpp, ros/messages/message_conversions.hpp,
+// ros/services/sparse_match_service.hpp): compressed-image headers, input bounds,
 // sparse_match requests, LoopClosure fields.
 
 #include "ros_parts_support.hpp"

@@ -1,0 +1,120 @@
+#include "mild_lcd/ros/detection/database_store.hpp"
+
+#include <filesystem>
+
+#include "mild_lcd/common/errors.hpp"
+
+namespace mild_lcd {
+namespace {
+
+std::string robotPath(const std::string& path, const std::string& robot) {
+  if (path.empty() || robot.empty()) return path;
+  const std::filesystem::path p(path);
+  return (p.parent_path() / robot / p.filename()).string();
+}
+
+mild::DirectoryLimits directoryLimits(const NodeSettings& settings) {
+  mild::DirectoryLimits limits;
+  limits.max_entries = static_cast<size_t>(settings.max_database_files);
+  limits.max_bytes = static_cast<unsigned long long>(settings.max_database_dir_mb) << 20;
+  return limits;
+}
+
+}  // namespace
+
+DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const std::string& robot_name)
+    : robot_(robot),
+      directory_(settings.database_dir, directoryLimits(settings)),
+      database_path_(robotPath(settings.database_path, robot_name)),
+      load_on_start_(settings.load_on_start),
+      save_on_shutdown_(settings.save_on_shutdown),
+      max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
+  if (!database_path_.empty()) {
+    try {
+      database_display_ = resolve(database_path_, false).display();
+    } catch (const mild::Error& e) {
+      throw mild::InvalidInput(std::string("parameter ~database_path: ") + e.what());
+    }
+  }
+}
+
+mild::ConfinedFile DatabaseStore::resolve(const std::string& requested, bool for_saving) const {
+  const std::string& name = requested.empty() ? database_path_ : requested;
+  if (name.empty()) throw mild::InvalidInput("no path given and no ~database_path set");
+  return directory_.resolve(name, for_saving);
+}
+
+std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
+  if (!load_on_start_) return "";
+  try {
+    const mild::ConfinedFile file = resolve("", false);
+    if (!file.exists()) return "database " + file.display() + " does not exist yet: starting with an empty map";
+    mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, false, max_bytes_);
+    const std::string message = prepared.report.message;
+    const auto lock = shared.lock();
+    mild::commitLoad(detector(shared).map(), std::move(prepared));
+    shared.team->mapChanged(robot_);  // the file holds it: no change to save
+    return message;
+  } catch (const std::exception& e) {
+    saves_allowed_ = false;
+    const auto lock = shared.lock();
+    failure(shared) = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
+                      "); the file is left untouched and nothing will be saved over it";
+    throw;
+  }
+}
+
+std::string DatabaseStore::save(SharedDetector& shared, const std::string& requested) {
+  const mild::ConfinedFile file = resolve(requested, true);
+  const auto lock = shared.lock();
+  if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
+  mild::saveMap(detector(shared).map(), file);
+  if (file.display() == database_display_) saved_changes_ = shared.changes;
+  return "saved " + std::to_string(detector(shared).map().size()) + " keyframes to " + file.display();
+}
+
+std::string DatabaseStore::autosave(SharedDetector& shared) {
+  if (!save_on_shutdown_ || !saves_allowed_) return "";
+  {
+    const auto lock = shared.lock();
+    if (saved_changes_ == shared.changes) return "";
+  }
+  return save(shared, "");
+}
+
+mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
+  const mild::ConfinedFile file = resolve(requested, false);
+  // LoopDetector's parameters never change after construction: preparing needs no lock.
+  mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, continue_session, max_bytes_);
+  mild::LoadReport report = prepared.report;
+  const auto lock = shared.lock();
+  mild::commitLoad(detector(shared).map(), std::move(prepared));
+  shared.team->mapChanged(robot_);
+  ++shared.changes;
+  // A map loaded by hand is the user's decision: the start-up failure no longer stands in the way.
+  failure(shared).clear();
+  saves_allowed_ = true;
+  return report;
+}
+
+mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string& requested) {
+  const mild::ConfinedFile file = resolve(requested, false);
+  mild::MapState state = mild::readMapFile(file, max_bytes_);
+  const auto lock = shared.lock();
+  // Merging into the empty map of a failed start-up would save over the map that failed: refused.
+  if (!failure(shared).empty()) {
+    throw mild::InvalidInput(failure(shared) + "; load_database without merge replaces it");
+  }
+  mild::LoadReport report = mild::mergeState(detector(shared).map(), std::move(state), file.display());
+  shared.team->mapChanged(robot_);
+  ++shared.changes;
+  return report;
+}
+
+std::string DatabaseStore::saveOnShutdown(SharedDetector& shared) {
+  if (!save_on_shutdown_) return "";
+  if (!saves_allowed_) return "not saving on shutdown: the map failed to load at start-up and is left as it was";
+  return save(shared, "");
+}
+
+}  // namespace mild_lcd
