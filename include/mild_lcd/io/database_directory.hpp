@@ -1,5 +1,6 @@
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,16 @@ class ConfinedFile {
   // link, a device, a folder), so that a save never replaces one.
   void refuseIfNotRegular() const;
   bool exists() const;
+  // Replaces the file crash-safely with what `write` writes to the descriptor it is given: the
+  // content goes to a temporary file of its own in the same folder ("<name>.tmp.<8 hex digits>",
+  // created exclusively, never through a link, locked while written), is flushed to disk (fsync),
+  // then renamed over the file, so a crash at any moment leaves either the previous file or the
+  // new one, both complete. Concurrent replacements never share a temporary file: each leaves a
+  // complete file, the last rename wins. Temporary files left by killed replacements are removed
+  // first (an unlocked one older than a minute). Throws InvalidInput when something other than a
+  // regular file sits at the name, IoError when the file cannot be written; whatever `write`
+  // throws is passed on. The previous file is kept on any failure.
+  void replace(const std::function<void(int fd)>& write) const;
 
  private:
   int folder_fd_ = -1;

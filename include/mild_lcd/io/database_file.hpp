@@ -27,12 +27,9 @@ namespace mild {
 // is loaded together, exactly as saved. What its loss costs: after a restart, the first few
 // inter-robot keyframes of a revisit, while the filter's belief builds up again.
 //
-// Saving is crash-safe: the file is written under a temporary name of its own in the same folder
-// (created exclusively, never through a link, locked while written), flushed to disk (fsync), then
-// renamed over the target, so a crash at any moment leaves either the previous file or the new
-// one, both complete. Concurrent saves to one target never share a temporary file: each leaves a
-// complete file, the last rename wins. Temporary files left by killed saves are removed by the next
-// save to the same target (an unlocked one older than a minute).
+// Saving is crash-safe (ConfinedFile::replace, io/database_directory.hpp): the file is written in
+// full under a temporary name beside it, flushed to disk, then renamed over the target, so a crash
+// at any moment leaves either the previous file or the new one, both complete.
 constexpr uint32_t kDatabaseFormatVersion = 3;
 // Default bound on the size of a file to load (the node's ~max_database_mb).
 constexpr unsigned long long kDefaultMaxDatabaseBytes = 16ull << 30;

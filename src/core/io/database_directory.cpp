@@ -1,10 +1,15 @@
 #include "mild_lcd/io/database_directory.hpp"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <vector>
@@ -20,6 +25,67 @@ constexpr size_t kMaxPathBytes = 4096;
 constexpr size_t kMaxComponentBytes = 255;
 
 std::string errnoText(int error) { return std::strerror(error); }
+
+// Temporary files of saves to `target`: "<target>.tmp.<8 hex digits>".
+std::string temporaryPrefix(const std::string& target) { return target + ".tmp."; }
+
+std::string randomSuffix() {
+  static std::atomic<uint64_t> counter{0};
+  uint64_t x = static_cast<uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count()) ^
+               (static_cast<uint64_t>(::getpid()) << 32) ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdull;
+  x ^= x >> 33;
+  char text[17];
+  std::snprintf(text, sizeof(text), "%016llx", static_cast<unsigned long long>(x));
+  return std::string(text, 8);
+}
+
+// Removes temporary files that killed saves left behind. A save in progress holds an exclusive lock
+// on its file, so a file whose lock can be taken is abandoned; the age test covers the instant
+// between a save creating its file and locking it.
+void removeStaleTemporaries(const ConfinedFile& file) {
+  const int dup_fd = ::dup(file.folder());
+  if (dup_fd < 0) return;
+  DIR* dir = ::fdopendir(dup_fd);
+  if (dir == nullptr) {
+    ::close(dup_fd);
+    return;
+  }
+  const std::string prefix = temporaryPrefix(file.name());
+  const auto now = std::chrono::system_clock::now();
+  std::vector<std::string> stale;
+  while (const dirent* entry = ::readdir(dir)) {
+    const std::string name = entry->d_name;
+    if (name.size() != prefix.size() + 8 || name.compare(0, prefix.size(), prefix) != 0) continue;
+    const int fd = ::openat(file.folder(), name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) continue;  // a link or a vanished file: not ours to remove
+    struct stat st {};
+    const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
+    const auto modified = std::chrono::system_clock::from_time_t(st.st_mtime);
+    if (regular && now - modified > std::chrono::seconds(60) && ::flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      stale.push_back(name);
+    }
+    ::close(fd);
+  }
+  ::closedir(dir);
+  for (const std::string& name : stale) ::unlinkat(file.folder(), name.c_str(), 0);
+}
+
+// A new temporary file beside the target, created exclusively (never an existing file or a link)
+// and locked for the duration of the save.
+int createTemporary(const ConfinedFile& file, std::string& name) {
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    name = temporaryPrefix(file.name()) + randomSuffix();
+    const int fd = ::openat(file.folder(), name.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
+    if (fd >= 0) {
+      ::flock(fd, LOCK_EX);
+      return fd;
+    }
+    if (errno != EEXIST) break;
+  }
+  throw IoError(file.display() + ": cannot create a temporary file beside it (" + errnoText(errno) + ")");
+}
 
 const char* kindOf(mode_t mode) {
   if (S_ISDIR(mode)) return "a folder";
@@ -87,6 +153,30 @@ void ConfinedFile::refuseIfNotRegular() const {
   if (!S_ISREG(st.st_mode)) {
     throw InvalidInput(display_ + " is " + kindOf(st.st_mode) + ", not a regular file: refusing to replace it");
   }
+}
+
+void ConfinedFile::replace(const std::function<void(int fd)>& write) const {
+  refuseIfNotRegular();
+  removeStaleTemporaries(*this);
+  std::string tmp;
+  const int fd = createTemporary(*this, tmp);
+  try {
+    write(fd);
+    if (::fsync(fd) != 0) throw IoError(display_ + ": cannot flush to disk (" + errnoText(errno) + ")");
+  } catch (...) {
+    ::unlinkat(folder_fd_, tmp.c_str(), 0);
+    ::close(fd);
+    throw;
+  }
+  // Renamed while still locked: the temporary file is never unlocked under its temporary name.
+  if (::renameat(folder_fd_, tmp.c_str(), folder_fd_, name_.c_str()) != 0) {
+    const std::string why = errnoText(errno);
+    ::unlinkat(folder_fd_, tmp.c_str(), 0);
+    ::close(fd);
+    throw IoError(display_ + ": cannot replace the file (" + why + ")");
+  }
+  ::close(fd);
+  ::fsync(folder_fd_);  // the rename itself must reach the disk too
 }
 
 int ConfinedFile::openForReading(unsigned long long& size) const {

@@ -1,17 +1,13 @@
 #include "mild_lcd/io/database_file.hpp"
 
-#include <dirent.h>
 #include <fcntl.h>
-#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
 
-#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 #include <map>
 #include <optional>
@@ -181,67 +177,6 @@ std::map<std::string, std::string> parameterLines(const std::string& text) {
 
 namespace {
 
-// Temporary files of saves to `target`: "<target>.tmp.<8 hex digits>".
-std::string temporaryPrefix(const std::string& target) { return target + ".tmp."; }
-
-std::string randomSuffix() {
-  static std::atomic<uint64_t> counter{0};
-  uint64_t x = static_cast<uint64_t>(std::chrono::steady_clock::now().time_since_epoch().count()) ^
-               (static_cast<uint64_t>(::getpid()) << 32) ^ (counter.fetch_add(1) * 0x9E3779B97F4A7C15ull);
-  x ^= x >> 33;
-  x *= 0xff51afd7ed558ccdull;
-  x ^= x >> 33;
-  char text[17];
-  std::snprintf(text, sizeof(text), "%016llx", static_cast<unsigned long long>(x));
-  return std::string(text, 8);
-}
-
-// Removes temporary files that killed saves left behind. A save in progress holds an exclusive lock
-// on its file, so a file whose lock can be taken is abandoned; the age test covers the instant
-// between a save creating its file and locking it.
-void removeStaleTemporaries(const ConfinedFile& file) {
-  const int dup_fd = ::dup(file.folder());
-  if (dup_fd < 0) return;
-  DIR* dir = ::fdopendir(dup_fd);
-  if (dir == nullptr) {
-    ::close(dup_fd);
-    return;
-  }
-  const std::string prefix = temporaryPrefix(file.name());
-  const auto now = std::chrono::system_clock::now();
-  std::vector<std::string> stale;
-  while (const dirent* entry = ::readdir(dir)) {
-    const std::string name = entry->d_name;
-    if (name.size() != prefix.size() + 8 || name.compare(0, prefix.size(), prefix) != 0) continue;
-    const int fd = ::openat(file.folder(), name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
-    if (fd < 0) continue;  // a link or a vanished file: not ours to remove
-    struct stat st {};
-    const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
-    const auto modified = std::chrono::system_clock::from_time_t(st.st_mtime);
-    if (regular && now - modified > std::chrono::seconds(60) && ::flock(fd, LOCK_EX | LOCK_NB) == 0) {
-      stale.push_back(name);
-    }
-    ::close(fd);
-  }
-  ::closedir(dir);
-  for (const std::string& name : stale) ::unlinkat(file.folder(), name.c_str(), 0);
-}
-
-// A new temporary file beside the target, created exclusively (never an existing file or a link)
-// and locked for the duration of the save.
-int createTemporary(const ConfinedFile& file, std::string& name) {
-  for (int attempt = 0; attempt < 16; ++attempt) {
-    name = temporaryPrefix(file.name()) + randomSuffix();
-    const int fd = ::openat(file.folder(), name.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0644);
-    if (fd >= 0) {
-      ::flock(fd, LOCK_EX);
-      return fd;
-    }
-    if (errno != EEXIST) break;
-  }
-  throw IoError(file.display() + ": cannot create a temporary file beside it (" + errnoText() + ")");
-}
-
 void writeAll(int fd, const std::vector<uint8_t>& bytes, off_t offset, const std::string& display) {
   size_t done = 0;
   while (done < bytes.size()) {
@@ -257,11 +192,9 @@ void writeAll(int fd, const std::vector<uint8_t>& bytes, off_t offset, const std
 void saveMap(const KeyframeMap& map, const std::string& path) { saveMap(map, fileAtPath(path)); }
 
 void saveMap(const KeyframeMap& map, const ConfinedFile& file) {
-  file.refuseIfNotRegular();
-  removeStaleTemporaries(file);
-  std::string tmp;
-  const int fd = createTemporary(file, tmp);
-  try {
+  // Written in full under a temporary name, then renamed over the file (ConfinedFile::replace): a
+  // crash at any moment leaves the previous file or the new one, both complete.
+  file.replace([&](int fd) {
     std::vector<uint8_t> header(kHeaderBytes, 0);
     writeAll(fd, header, 0, file.display());
     if (::lseek(fd, static_cast<off_t>(kHeaderBytes), SEEK_SET) < 0) throw IoError(file.display() + ": cannot seek");
@@ -276,21 +209,7 @@ void saveMap(const KeyframeMap& map, const ConfinedFile& file) {
     putRaw(header, writer.checksum());
     putRaw(header, crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), header.data(), header.size()));
     writeAll(fd, header, 0, file.display());
-    if (::fsync(fd) != 0) throw IoError(file.display() + ": cannot flush to disk (" + errnoText() + ")");
-  } catch (...) {
-    ::unlinkat(file.folder(), tmp.c_str(), 0);
-    ::close(fd);
-    throw;
-  }
-  // Renamed while still locked: the temporary file is never unlocked under its temporary name.
-  if (::renameat(file.folder(), tmp.c_str(), file.folder(), file.name().c_str()) != 0) {
-    const std::string why = errnoText();
-    ::unlinkat(file.folder(), tmp.c_str(), 0);
-    ::close(fd);
-    throw IoError(file.display() + ": cannot replace the file (" + why + ")");
-  }
-  ::close(fd);
-  ::fsync(file.folder());  // the rename itself must reach the disk too
+  });
 }
 
 namespace {

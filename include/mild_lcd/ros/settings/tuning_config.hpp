@@ -2,9 +2,10 @@
 
 // The bridge between dynamic_reconfigure's TuningConfig (generated from the declarations,
 // tuning_cfg.hpp) and the detector's parameters: a TuningConfig field is a runtime parameter
-// (runtimeParameterNames()) with its first '/' as '_'. Values travel through the one parameter registry
-// (detector/detector_parameters.hpp), so names, types and validation are the detector's own. No master needed: tested
-// in test_ros_parts.
+// (runtimeParameterNames()) with its first '/' as '_'. Values travel typed, through the one
+// parameter registry (detector/detector_parameters.hpp: visitParameters out, loadDetectorParams in,
+// the request read as a ParameterSource), so names, types and validation are the detector's own
+// and no value is written out as text and read back. No master needed: tested in test_ros_parts.
 
 #include <string>
 
