@@ -33,6 +33,7 @@
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
 #include <Eigen/Geometry>
+#include "common/ros_quaternion.hpp"
 #include "common/tool_main.hpp"
 
 #include "mild_lcd/LoopClosure.h"
@@ -146,15 +147,6 @@ Run makeRun(const Options& opt) {
   return run;
 }
 
-geometry_msgs::Quaternion quaternion(const Eigen::Quaterniond& q) {
-  geometry_msgs::Quaternion m;
-  m.w = q.w();
-  m.x = q.x();
-  m.y = q.y();
-  m.z = q.z();
-  return m;
-}
-
 // The candidate camera's true pose in the query camera's optical frame (LoopCandidate's convention),
 // for a camera at the base's origin looking along its x axis: optical z = base x, x = -base y,
 // y = -base z (the back-end's fallback mounting when tf has none).
@@ -169,7 +161,7 @@ void setRelativePose(const Pose2& query, const Pose2& candidate, mild_lcd::LoopC
   const Eigen::Vector3d translation = base_from_camera.transpose() * Eigen::Vector3d(rel.x, rel.y, 0.0);
   c.has_relative_pose = true;
   c.metric_translation = true;
-  c.relative_rotation = quaternion(Eigen::Quaterniond(rotation).normalized());
+  c.relative_rotation = mild::tools::quaternion(Eigen::Quaterniond(rotation).normalized());
   c.relative_translation.x = translation.x();
   c.relative_translation.y = translation.y();
   c.relative_translation.z = translation.z();
@@ -296,7 +288,8 @@ nav_msgs::Odometry odometryMsg(const ros::Time& stamp, const Pose2& pose) {
   odom.child_frame_id = "base_link";
   odom.pose.pose.position.x = pose.x;
   odom.pose.pose.position.y = pose.y;
-  odom.pose.pose.orientation = quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ())));
+  odom.pose.pose.orientation =
+      mild::tools::quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ())));
   return odom;
 }
 

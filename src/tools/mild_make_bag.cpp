@@ -26,6 +26,8 @@
 #include <Eigen/Geometry>
 #include <boost/make_shared.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include "common/drift_options.hpp"
+#include "common/ros_quaternion.hpp"
 #include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
@@ -74,28 +76,13 @@ void addOptions(CLI::App& app, Options& opt) {
                  "poses.txt of the sequence (x y yaw per frame): write odometry with drift on --odom-topic, tf odom -> "
                  "base_link, and static tf base_link -> --frame-id");
   app.add_option("--odom-topic", opt.odom_topic, "nav_msgs/Odometry topic")->capture_default_str();
-  app.add_option("--drift-seed", opt.drift.seed, "seed of the odometry's drift")->capture_default_str();
-  app.add_option("--scale-error", opt.drift.scale_error, "odometry scale error")->capture_default_str();
-  app.add_option("--translation-noise", opt.drift.translation_noise, "translation noise per metre")
-      ->capture_default_str();
-  app.add_option("--heading-bias", opt.drift.heading_bias, "heading bias, rad per metre")->capture_default_str();
-  app.add_option("--heading-random-walk", opt.drift.heading_random_walk, "heading random walk, rad per sqrt(m)")
-      ->capture_default_str();
+  mild::tools::addDriftOptions(app, opt.drift, "--drift-seed");
   app.add_option("--features", opt.features, "extractor of the Keyframe messages: orb, brisk or akaze")
       ->capture_default_str();
 }
 
-geometry_msgs::Quaternion quaternion(const Eigen::Quaterniond& q) {
-  geometry_msgs::Quaternion m;
-  m.w = q.w();
-  m.x = q.x();
-  m.y = q.y();
-  m.z = q.z();
-  return m;
-}
-
 geometry_msgs::Quaternion yawQuaternion(double yaw) {
-  return quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ())));
+  return mild::tools::quaternion(Eigen::Quaterniond(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ())));
 }
 
 // --camera's intrinsics as a CameraInfo; an empty one without --camera.
@@ -140,7 +127,7 @@ void writeCameraMount(rosbag::Bag& bag, const Options& opt, const ros::Time& sta
   mount.header.stamp = stamp;
   mount.header.frame_id = opt.base_frame;
   mount.child_frame_id = opt.frame_id;
-  mount.transform.rotation = quaternion(Eigen::Quaterniond(e.rotation));
+  mount.transform.rotation = mild::tools::quaternion(Eigen::Quaterniond(e.rotation));
   tf2_msgs::TFMessage statics;
   statics.transforms.push_back(mount);
   // Latched, as tf2's static broadcaster publishes it: rosbag play then latches it too.

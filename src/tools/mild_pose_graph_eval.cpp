@@ -18,6 +18,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include "common/drift_options.hpp"
 #include "common/tool_main.hpp"
 
 #include "common/image_sequence.hpp"
@@ -376,13 +377,7 @@ int main(int argc, char** argv) {
                  "detector parameters, with the camera's intrinsics (config/bench_camera.yaml)");
   app.add_option("--graph-config", opt.graph_config, "pose-graph parameters (a YAML with a graph: section)");
   app.add_option("--frames", opt.frames, "only the first N frames");
-  app.add_option("--seed", opt.drift.seed, "seed of the odometry's drift")->capture_default_str();
-  app.add_option("--scale-error", opt.drift.scale_error, "odometry scale error")->capture_default_str();
-  app.add_option("--translation-noise", opt.drift.translation_noise, "translation noise per metre")
-      ->capture_default_str();
-  app.add_option("--heading-bias", opt.drift.heading_bias, "heading bias, rad per metre")->capture_default_str();
-  app.add_option("--heading-random-walk", opt.drift.heading_random_walk, "heading random walk, rad per sqrt(m)")
-      ->capture_default_str();
+  mild::tools::addDriftOptions(app, opt.drift, "--seed");
   app.add_option("--wrong-fraction", opt.wrong_fraction, "fraction of the loops replaced by wrong ones")
       ->capture_default_str();
   app.add_option("--wrong-seed", opt.wrong_seed, "seed of the wrong loops")->capture_default_str();

@@ -29,7 +29,7 @@ struct Observation {
   double stamp = 0.0;
   std::optional<uint64_t> id;  // the sender's id, or the next free one
   size_t robot = 0;            // whose keyframe (the index in the RobotTeam; 0 for one robot). The
-                               // session is the robot's detector's (LoopDetector::session).
+                               // session is the robot's detector's (KeyframeMap::session).
   // Features extracted from an image (FeatureFrontEnd::extract): how long that took, reported as
   // DetectionResult::stats.extract_ms. 0 for features that arrived as such.
   double extract_ms = 0.0;

@@ -36,7 +36,7 @@ class DatabaseStore {
   // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure.
   std::string save(SharedDetector& shared, const std::string& requested);
   mild::LoadReport load(SharedDetector& shared, const std::string& requested, bool continue_session);
-  // Adds a saved map to the running one (LoopDetector::merge). The file is read without the lock;
+  // Adds a saved map to the running one (KeyframeMap::merge). The file is read without the lock;
   // the merge itself holds it while the index is rebuilt (keyframes wait in the queue meanwhile).
   mild::LoadReport merge(SharedDetector& shared, const std::string& requested);
 
