@@ -65,7 +65,7 @@ LoadReport loadMap(KeyframeMap& map, const std::string& path, bool continue_sess
 // index rebuild: prepareLoad touches nothing shared (only the map's parameters, which never change),
 // commitLoad swaps the prepared state in and cannot fail.
 struct PreparedLoad {
-  PreparedRestore restore;
+  MapContents restore;
   LoadReport report;
 };
 PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,

@@ -44,8 +44,9 @@ struct MapState {
   std::vector<uint8_t> filter_state;        // its saveState()
 };
 
-// A state checked and turned into a ready database and filter, waiting to replace a map's.
-struct PreparedRestore {
+// What a map holds, ready: a map's own contents, and a checked state (prepareRestore,
+// prepareMerge) waiting to replace them.
+struct MapContents {
   KeyframeDatabase database;
   std::unique_ptr<TemporalFilter> filter;
   std::vector<KeyframeRecord> records;
@@ -65,21 +66,21 @@ class KeyframeMap {
   KeyframeMap(const DatabaseParams& database, const FilterParams& filter, std::string descriptor_name);
 
   // --- Reading -----------------------------------------------------------------------------------
-  size_t size() const { return records_.size(); }
+  size_t size() const { return contents_.records.size(); }
   // The width of the descriptors this map stores and accepts, in bytes.
-  int descriptorBytes() const { return database_.descriptorBytes(); }
+  int descriptorBytes() const { return contents_.database.descriptorBytes(); }
   const DatabaseParams& databaseParams() const { return database_params_; }
-  const KeyframeDatabase& database() const { return database_; }
-  const TemporalFilter& filter() const { return *filter_; }
-  const KeyframeRecord& record(KeyframeIndex k) const { return records_[k]; }
+  const KeyframeDatabase& database() const { return contents_.database; }
+  const TemporalFilter& filter() const { return *contents_.filter; }
+  const KeyframeRecord& record(KeyframeIndex k) const { return contents_.records[k]; }
   std::optional<KeyframeIndex> find(uint64_t id) const;
   Features features(KeyframeIndex k) const;
-  uint64_t nextId() const { return next_id_; }
+  uint64_t nextId() const { return contents_.next_id; }
   // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
-  KeyframeIndex sessionStart() const { return session_start_; }
+  KeyframeIndex sessionStart() const { return contents_.session_start; }
   // The session new keyframes join: 0 at first, above every stored one after a load or merge
   // (continue_session keeps the saved run's).
-  uint32_t session() const { return session_; }
+  uint32_t session() const { return contents_.session; }
   size_t memoryBytes() const;
   // The parameters of the detector that builds this map, as "name: value" lines: saved with it, so
   // that a load can say which of them differ.
@@ -96,9 +97,9 @@ class KeyframeMap {
   // and none is left to assign.
   void checkId(std::optional<uint64_t> id) const;
   // Throws CapacityError when `descriptors` would not fit the database.
-  void checkRoomFor(const DescriptorList& descriptors) const { database_.checkRoomFor(descriptors); }
+  void checkRoomFor(const DescriptorList& descriptors) const { contents_.database.checkRoomFor(descriptors); }
   // The temporal filter the pipeline updates with each of this map's own keyframes.
-  TemporalFilter& filter() { return *filter_; }
+  TemporalFilter& filter() { return *contents_.filter; }
   // Stores a keyframe whose id was checked (checkId) and whose descriptors fit (checkRoomFor);
   // returns its index. Cannot fail for a checked keyframe.
   KeyframeIndex add(uint64_t id, double stamp, std::vector<cv::KeyPoint> keypoints, const DescriptorList& descriptors,
@@ -116,8 +117,8 @@ class KeyframeMap {
   void restore(MapState state, bool continue_session);
   // restore() in two steps: prepareRestore reads only the map's parameters (fixed at
   // construction), so it may run without the caller's lock; commitRestore cannot fail.
-  PreparedRestore prepareRestore(MapState state, bool continue_session) const;
-  void commitRestore(PreparedRestore&& prepared);
+  MapContents prepareRestore(MapState state, bool continue_session) const;
+  void commitRestore(MapContents&& prepared);
   // Adds the keyframes of a saved map (yesterday's, another robot's) to this one, keeping both: they
   // become earlier sessions (their session numbers shifted above every number in use here), always
   // eligible as candidates, while the running session goes on. The index is rebuilt (the running
@@ -125,25 +126,19 @@ class KeyframeMap {
   // restarts from "no loop", as for a new session. Ids must be distinct across the two maps.
   // Throws InvalidInput, changing nothing, when the state is inconsistent or shares an id.
   void merge(MapState state);
-  PreparedRestore prepareMerge(MapState state) const;  // reads this map: hold its lock
+  MapContents prepareMerge(MapState state) const;  // reads this map: hold its lock
 
  private:
   void checkWidth(const MapState& state) const;  // throws InvalidInput for another descriptor width
   // Checks `state` and builds its database; session_start and session as given, the filter fresh
   // or from the state.
-  PreparedRestore build(MapState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
+  MapContents build(MapState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const;
 
   DatabaseParams database_params_;
   FilterParams filter_params_;
   std::string descriptor_name_;
   std::string builder_parameters_;
-  KeyframeDatabase database_;
-  std::unique_ptr<TemporalFilter> filter_;
-  std::vector<KeyframeRecord> records_;
-  std::unordered_map<uint64_t, KeyframeIndex> index_of_id_;
-  uint64_t next_id_ = 0;
-  KeyframeIndex session_start_ = 0;
-  uint32_t session_ = 0;
+  MapContents contents_;
 };
 
 }  // namespace mild

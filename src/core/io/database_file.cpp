@@ -422,7 +422,7 @@ PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool 
       differing += (differing.empty() ? "" : ", ") + name + " " + it->second + " -> " + value;
     }
   });
-  std::optional<PreparedRestore> restore;
+  std::optional<MapContents> restore;
   try {
     restore.emplace(map.prepareRestore(std::move(state), continue_session));
   } catch (const InvalidInput& e) {

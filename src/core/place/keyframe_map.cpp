@@ -22,39 +22,38 @@ KeyframeMap::KeyframeMap(const DatabaseParams& database, const FilterParams& fil
     : database_params_(database),
       filter_params_(filter),
       descriptor_name_(std::move(descriptor_name)),
-      database_(database),
-      filter_(makeTemporalFilter(filter)) {}
+      contents_{KeyframeDatabase(database), makeTemporalFilter(filter), {}, {}, 0, 0, 0} {}
 
 std::optional<KeyframeIndex> KeyframeMap::find(uint64_t id) const {
-  auto it = index_of_id_.find(id);
-  if (it == index_of_id_.end()) return std::nullopt;
+  auto it = contents_.index_of_id.find(id);
+  if (it == contents_.index_of_id.end()) return std::nullopt;
   return it->second;
 }
 
 Features KeyframeMap::features(KeyframeIndex k) const {
-  return Features{records_[k].keypoints, database_.descriptors(k), records_[k].camera, {}};
+  return Features{contents_.records[k].keypoints, contents_.database.descriptors(k), contents_.records[k].camera, {}};
 }
 
 size_t KeyframeMap::memoryBytes() const {
-  size_t bytes = database_.memoryBytes() + records_.capacity() * sizeof(KeyframeRecord);
-  for (const auto& r : records_) bytes += r.keypoints.capacity() * sizeof(cv::KeyPoint);
-  return bytes + index_of_id_.size() * (sizeof(uint64_t) + sizeof(KeyframeIndex) + 2 * sizeof(void*));
+  size_t bytes = contents_.database.memoryBytes() + contents_.records.capacity() * sizeof(KeyframeRecord);
+  for (const auto& r : contents_.records) bytes += r.keypoints.capacity() * sizeof(cv::KeyPoint);
+  return bytes + contents_.index_of_id.size() * (sizeof(uint64_t) + sizeof(KeyframeIndex) + 2 * sizeof(void*));
 }
 
 KeyframeIndex KeyframeMap::eligibleCount(double stamp, int exclusion_frames, double exclusion_seconds) const {
   // The query will be keyframe n; keyframe j may be a candidate when n - j >= exclusion_frames.
-  const size_t n = records_.size();
+  const size_t n = contents_.records.size();
   const size_t frames = static_cast<size_t>(exclusion_frames);
   size_t limit = frames == 0 ? n : (n + 1 > frames ? n + 1 - frames : 0);
-  if (limit <= session_start_) return session_start_;  // earlier sessions are never "a moment ago"
+  if (limit <= contents_.session_start) return contents_.session_start;  // earlier sessions are never "a moment ago"
   if (exclusion_seconds > 0.0) {
     // Keyframes are stored in arrival order; stamps are expected to grow, so the eligible set is a prefix.
     const double newest_allowed = stamp - exclusion_seconds;
-    const auto end = records_.begin() + static_cast<long>(limit);
-    limit = static_cast<size_t>(std::upper_bound(records_.begin(), end, newest_allowed,
+    const auto end = contents_.records.begin() + static_cast<long>(limit);
+    limit = static_cast<size_t>(std::upper_bound(contents_.records.begin(), end, newest_allowed,
                                                  [](double s, const KeyframeRecord& r) { return s < r.stamp; }) -
-                                records_.begin());
-    limit = std::max<size_t>(limit, session_start_);
+                                contents_.records.begin());
+    limit = std::max<size_t>(limit, contents_.session_start);
   }
   return static_cast<KeyframeIndex>(limit);
 }
@@ -64,38 +63,38 @@ void KeyframeMap::checkId(std::optional<uint64_t> id) const {
     if (*id > kMaxKeyframeId) {
       throw InvalidInput("keyframe id " + std::to_string(*id) + " is too large (ids must be below 2^64 - 1)");
     }
-    if (index_of_id_.count(*id))
+    if (contents_.index_of_id.count(*id))
       throw InvalidInput("keyframe id " + std::to_string(*id) + " is already in the database");
-  } else if (next_id_ > kMaxKeyframeId) {
+  } else if (contents_.next_id > kMaxKeyframeId) {
     throw CapacityError("no keyframe id left to assign (the largest id in use is 2^64 - 2): give ids explicitly");
   }
 }
 
 KeyframeIndex KeyframeMap::add(uint64_t id, double stamp, std::vector<cv::KeyPoint> keypoints,
                                const DescriptorList& descriptors, const CameraIntrinsics& camera) {
-  database_.insert(descriptors);
-  const auto index = static_cast<KeyframeIndex>(records_.size());
-  records_.push_back(KeyframeRecord{id, stamp, session_, std::move(keypoints), camera});
-  index_of_id_.emplace(id, index);
-  next_id_ = std::max(next_id_, id + 1);
+  contents_.database.insert(descriptors);
+  const auto index = static_cast<KeyframeIndex>(contents_.records.size());
+  contents_.records.push_back(KeyframeRecord{id, stamp, contents_.session, std::move(keypoints), camera});
+  contents_.index_of_id.emplace(id, index);
+  contents_.next_id = std::max(contents_.next_id, id + 1);
   return index;
 }
 
 void KeyframeMap::reset() {
-  database_.clear();
-  filter_->reset();
-  records_.clear();
-  index_of_id_.clear();
-  next_id_ = 0;
-  session_start_ = 0;
-  session_ = 0;
+  contents_.database.clear();
+  contents_.filter->reset();
+  contents_.records.clear();
+  contents_.index_of_id.clear();
+  contents_.next_id = 0;
+  contents_.session_start = 0;
+  contents_.session = 0;
 }
 
 void KeyframeMap::restore(MapState state, bool continue_session) {
   commitRestore(prepareRestore(std::move(state), continue_session));
 }
 
-PreparedRestore KeyframeMap::prepareRestore(MapState state, bool continue_session) const {
+MapContents KeyframeMap::prepareRestore(MapState state, bool continue_session) const {
   const size_t n = state.records.size();
   if (state.session_start > n) throw InvalidInput("state's session start lies beyond its keyframes");
   // Resuming: the saved run's session (that of its newest keyframe, unless it had just begun a new
@@ -118,11 +117,11 @@ void KeyframeMap::checkWidth(const MapState& state) const {
   }
 }
 
-PreparedRestore KeyframeMap::prepareMerge(MapState state) const {
+MapContents KeyframeMap::prepareMerge(MapState state) const {
   checkWidth(state);
   const size_t added = state.records.size();
   for (const KeyframeRecord& r : state.records) {
-    if (index_of_id_.count(r.id)) {
+    if (contents_.index_of_id.count(r.id)) {
       throw InvalidInput("keyframe id " + std::to_string(r.id) +
                          " is in both maps: merging needs distinct ids (give each robot or session's Keyframe ids a "
                          "range of their own)");
@@ -133,35 +132,34 @@ PreparedRestore KeyframeMap::prepareMerge(MapState state) const {
                        std::to_string(state.descriptors.size()) + " descriptor lists");
   }
   // The merged map's sessions are renumbered above every number in use here.
-  const uint64_t base = static_cast<uint64_t>(std::max(session_, largestSession(records_))) + 1;
+  const uint64_t base = static_cast<uint64_t>(std::max(contents_.session, largestSession(contents_.records))) + 1;
   if (base + largestSession(state.records) > UINT32_MAX) throw InvalidInput("too many sessions to merge");
   MapState combined;
-  combined.next_id = std::max(next_id_, state.next_id);
-  const size_t n = records_.size();
+  combined.next_id = std::max(contents_.next_id, state.next_id);
+  const size_t n = contents_.records.size();
   combined.records.reserve(n + added);
   combined.descriptors.reserve(n + added);
   // Earlier sessions first, then the merged map, then the running session: its keyframes stay last.
-  for (KeyframeIndex k = 0; k < session_start_; ++k) {
-    combined.records.push_back(records_[k]);
-    combined.descriptors.push_back(database_.descriptors(k));
+  for (KeyframeIndex k = 0; k < contents_.session_start; ++k) {
+    combined.records.push_back(contents_.records[k]);
+    combined.descriptors.push_back(contents_.database.descriptors(k));
   }
   for (size_t k = 0; k < added; ++k) {
     combined.records.push_back(std::move(state.records[k]));
     combined.records.back().session = static_cast<uint32_t>(base + combined.records.back().session);
     combined.descriptors.push_back(std::move(state.descriptors[k]));
   }
-  for (KeyframeIndex k = session_start_; k < n; ++k) {
-    combined.records.push_back(records_[k]);
-    combined.descriptors.push_back(database_.descriptors(k));
+  for (KeyframeIndex k = contents_.session_start; k < n; ++k) {
+    combined.records.push_back(contents_.records[k]);
+    combined.descriptors.push_back(contents_.database.descriptors(k));
   }
-  const auto session_start = static_cast<KeyframeIndex>(session_start_ + added);
-  return build(std::move(combined), session_start, session_, false);
+  const auto session_start = static_cast<KeyframeIndex>(contents_.session_start + added);
+  return build(std::move(combined), session_start, contents_.session, false);
 }
 
 void KeyframeMap::merge(MapState state) { commitRestore(prepareMerge(std::move(state))); }
 
-PreparedRestore KeyframeMap::build(MapState state, KeyframeIndex session_start, uint32_t session,
-                                   bool load_filter) const {
+MapContents KeyframeMap::build(MapState state, KeyframeIndex session_start, uint32_t session, bool load_filter) const {
   const size_t n = state.records.size();
   if (state.descriptors.size() != n)
     throw InvalidInput("state has " + std::to_string(n) + " keyframes but " + std::to_string(state.descriptors.size()) +
@@ -197,23 +195,15 @@ PreparedRestore KeyframeMap::build(MapState state, KeyframeIndex session_start, 
     filter->loadState(state.filter_state);
     if (filter->stateKeyframes() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
   }
-  return PreparedRestore{std::move(database),
-                         std::move(filter),
-                         std::move(state.records),
-                         std::move(index_of_id),
-                         state.next_id,
-                         session_start,
-                         session};
+  return MapContents{std::move(database),
+                     std::move(filter),
+                     std::move(state.records),
+                     std::move(index_of_id),
+                     state.next_id,
+                     session_start,
+                     session};
 }
 
-void KeyframeMap::commitRestore(PreparedRestore&& prepared) {
-  database_ = std::move(prepared.database);
-  filter_ = std::move(prepared.filter);
-  records_ = std::move(prepared.records);
-  index_of_id_ = std::move(prepared.index_of_id);
-  next_id_ = prepared.next_id;
-  session_start_ = prepared.session_start;
-  session_ = prepared.session;
-}
+void KeyframeMap::commitRestore(MapContents&& prepared) { contents_ = std::move(prepared); }
 
 }  // namespace mild
