@@ -5,6 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <condition_variable>
 #include <cstdlib>
 #include <mutex>
@@ -83,5 +87,37 @@ inline int playBag(const std::string& bag, const std::string& topic, const std::
                               topic + " > /dev/null 2>&1";
   return std::system(command.c_str());
 }
+
+// `rosbag play` kept alive past the end of the bag (--keep-alive) until this object goes: a player
+// that exits right after publishing (as --immediate does with a backlog in its sockets) takes the
+// messages it has not yet written with it, on a loaded machine the last few of the bag.
+class KeptAliveBagPlayer {
+ public:
+  KeptAliveBagPlayer(const std::string& bag, const std::string& topic, const std::string& rate_args) {
+    const std::string command = "exec rosbag play --quiet --wait-for-subscribers --keep-alive " + rate_args + " '" +
+                                bag + "' --topics " + topic + " > /dev/null 2>&1";
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      ::execl("/bin/sh", "sh", "-c", command.c_str(), static_cast<char*>(nullptr));
+      ::_exit(127);
+    }
+  }
+  KeptAliveBagPlayer(const KeptAliveBagPlayer&) = delete;
+  KeptAliveBagPlayer& operator=(const KeptAliveBagPlayer&) = delete;
+  ~KeptAliveBagPlayer() {
+    if (pid_ <= 0) return;
+    ::kill(pid_, SIGINT);
+    int status = 0;
+    for (int i = 0; i < 100 && ::waitpid(pid_, &status, WNOHANG) == 0; ++i) ::usleep(50000);
+    if (::waitpid(pid_, &status, WNOHANG) == 0) {  // still there after 5 s
+      ::kill(pid_, SIGKILL);
+      ::waitpid(pid_, &status, 0);
+    }
+  }
+  bool started() const { return pid_ > 0; }
+
+ private:
+  pid_t pid_ = -1;
+};
 
 }  // namespace mild_lcd::test

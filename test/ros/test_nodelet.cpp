@@ -412,7 +412,10 @@ std::vector<mild_lcd::LoopClosure> replayOnce(const std::string& rate_args) {
   EXPECT_TRUE(ros::service::call("reset", trigger));
   TopicLog<mild_lcd::LoopClosure> outputs("loop_closure");
   EXPECT_TRUE(outputs.waitForPublisher(30.0));
-  EXPECT_EQ(playBag(fixtureBag(), privateParam("topic"), rate_args), 0);
+  // Kept alive until every answer is in: at --immediate the player's sockets hold a backlog when it
+  // reaches the end of the bag, and a player that exited then would lose its last frames.
+  const KeptAliveBagPlayer player(fixtureBag(), privateParam("topic"), rate_args);
+  EXPECT_TRUE(player.started());
   EXPECT_TRUE(outputs.waitForCount(kFixtureFrames, kReplayTimeout));
   ros::WallDuration(0.5).sleep();
   return outputs.messages();
