@@ -36,7 +36,18 @@ ROWS = {
     "index/max_candidates_per_feature 1024": "index:\n  max_candidates_per_feature: 1024\n",
     "verification/early_stop false": "verification:\n  early_stop: false\n",
     "verification/enabled false": "verification:\n  enabled: false\n",
+    # The cost-accuracy frontier of docs/accuracy.md: descriptors and budgets (ROWS=frontier).
+    "orb/num_features 1500": "orb:\n  num_features: 1500\n",
+    "orb/num_features 3000": "orb:\n  num_features: 3000\n",
+    "features/type brisk": "features:\n  type: brisk\n",
+    "features/type akaze": "features:\n  type: akaze\n",
+    "akaze, octaves 2": "features:\n  type: akaze\nakaze:\n  octaves: 2\n",
+    "akaze, half resolution": "features:\n  type: akaze\n",
 }
+# Rows that also change mild_offline's arguments (--scale: every frame resized before detection).
+ROW_ARGS = {"akaze, half resolution": ["--scale", "0.5"]}
+FRONTIER = ["default", "orb/num_features 1500", "orb/num_features 3000", "features/type brisk", "features/type akaze",
+            "akaze, octaves 2", "akaze, half resolution"]
 STAGES = ["extract_ms", "query_ms", "filter_ms", "verify_ms", "keyframe_ms", "keyframe_cpu_ms"]
 
 
@@ -52,6 +63,7 @@ def run(offline, out, row, yaml_text, name, folder):
            os.path.join(folder, "gt_loops.txt"), "--min-gap", "40", "--stats", stats]
     if yaml_text:
         cmd += ["--config", config]
+    cmd += ROW_ARGS.get(row.replace(" (again)", ""), [])
     text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     recall = float(re.search(r"recall@100%P: ([0-9.]+)", text).group(1))
     ap = float(re.search(r"average precision: ([0-9.]+)", text).group(1))
@@ -70,9 +82,9 @@ def main():
     ap.add_argument("--offline", required=True)
     ap.add_argument("--out", required=True)
     ap.add_argument("--sequence", action="append", required=True, help="name=folder; names gp_* are real")
-    ap.add_argument("--rows", default="", help="comma-separated row names (default: every row)")
+    ap.add_argument("--rows", default="", help="comma-separated row names, or frontier (default: every row)")
     args = ap.parse_args()
-    rows = [r for r in args.rows.split(",") if r] if args.rows else list(ROWS)
+    rows = FRONTIER if args.rows == "frontier" else [r for r in args.rows.split(",") if r] if args.rows else list(ROWS)
     for r in rows:
         if r not in ROWS:
             sys.exit(f"unknown row {r!r}; rows: {', '.join(ROWS)}")
@@ -114,6 +126,15 @@ def main():
               f"{stage(row, 'keyframe_cpu_ms'):.1f} ({ratio:.2f}) | "
               f"{mean(row, True, 'recall_at_100p'):.3f} / {mean(row, True, 'ap'):.3f} | "
               f"{mean(row, False, 'recall_at_100p'):.3f} / {mean(row, False, 'ap'):.3f} |")
+    names = [n for n, _ in sequences]
+    print("\n| configuration | keyframe ms at 640 x 360 (real, wall) | " + " | ".join(names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    for row in order:
+        real = [v for n, v in results[row].items() if n.startswith("gp_")]
+        total = sum(v["keyframes"] for v in real)
+        real_ms = sum(v["median_ms"]["keyframe_ms"] * v["keyframes"] for v in real) / max(1, total)
+        print(f"| {row} | {real_ms:.1f} | " + " | ".join(
+            f"{results[row][n]['recall_at_100p']:.3f} / {results[row][n]['ap']:.3f}" for n in names) + " |")
     print("\nms: median per keyframe of each sequence, weighted by its keyframes; stages and keyframe in wall time, "
           "keyframe CPU in the thread's CPU time (robust to other processes); accuracy: mean over the sequences of "
           "each kind (real = gp_*).")

@@ -48,12 +48,15 @@ def kind_of(name):
 
 
 WRONG_WEIGHT = 1.0  # --wrong-weight: a wrong candidate counts this many times a right one in the fit
-GATE = 0.5  # the verification gate at the default decision probability (belowDecision)
+DECISION = 0.91  # --decision: scoring/decision_probability, where the verification gate caps the unverified
+L2 = 0.001
 
 
 def published(score, verified):
+    """The probability mild_lcd publishes (candidate_scorer.cpp): the model's, and for a candidate that
+    failed verification at most just below the decision (belowDecision)."""
     p = 1.0 / (1.0 + math.exp(-score))
-    return p if verified else p * GATE
+    return p if verified else min(p, math.nextafter(DECISION, 0.0))
 
 
 def load_gt(seq):
@@ -97,16 +100,20 @@ def load_run(spec, min_gap=40):
 
 
 def row_weights(runs, rows_of):
-    """Each kind weighs 1, each of its steps 1 / (steps of the kind), each run of a step
+    """Each descriptor weighs 1, each kind of a descriptor the same, each of its steps 1 / (steps of the kind), each run of a step
     1 / (runs of the step), each row of a run equally."""
     steps_of_kind, runs_of_step = {}, {}
+    kinds_of_descriptor = {}
     for r in runs:
-        steps_of_kind.setdefault(r["kind"], set()).add(r["step"])
-        runs_of_step[(r["kind"], r["step"])] = runs_of_step.get((r["kind"], r["step"]), 0) + 1
+        kind = (r.get("descriptor", ""), r["kind"])
+        kinds_of_descriptor.setdefault(kind[0], set()).add(kind)
+        steps_of_kind.setdefault(kind, set()).add(r["step"])
+        runs_of_step[(kind, r["step"])] = runs_of_step.get((kind, r["step"]), 0) + 1
     x, y, w = [], [], []
     for r in runs:
+        kind = (r.get("descriptor", ""), r["kind"])
         labelled = [row for row in rows_of(r) if row[3] >= 0]
-        share = len(steps_of_kind[r["kind"]]) * runs_of_step[(r["kind"], r["step"])]
+        share = len(kinds_of_descriptor[kind[0]]) * len(steps_of_kind[kind]) * runs_of_step[(kind, r["step"])]
         for _, _, f, lab, _ in labelled:
             x.append(f)
             y.append(lab)
@@ -171,11 +178,29 @@ def metrics(run, weights, bias):
             r100 = recall
         ap += precision * (recall - prev)
         prev = recall
-    right = sum(1 for s, lab in ranked if s >= 0.5 and lab == 1)
-    wrong = sum(1 for s, lab in ranked if s >= 0.5 and lab == 0)
+    right = sum(1 for s, lab in ranked if s >= DECISION and lab == 1)
+    wrong = sum(1 for s, lab in ranked if s >= DECISION and lab == 0)
     return {"recall_at_100_precision": r100, "average_precision": ap,
             "precision_at_half": right / max(1, right + wrong) if right + wrong else 1.0,
             "recall_at_half": right / n, "wrong_at_half": wrong}
+
+
+def ece(run, weights, bias, edges=(0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)):
+    """The bench referee's expected calibration error (../shared/bench/calibration.py) of each query's
+    best candidate, don't-care pairs skipped."""
+    best = {}
+    for i, _, f, lab, verified in run["rows"]:
+        s = published(bias + float(np.dot(weights, f)), verified)
+        if i not in best or s > best[i][0]:
+            best[i] = (s, lab)
+    scored = [(s, lab == 1) for s, lab in best.values() if lab >= 0]
+    total, err = len(scored), 0.0
+    for k, (lo, hi) in enumerate(zip(edges, edges[1:])):
+        last = k == len(edges) - 2
+        cell = [(s, t) for s, t in scored if lo <= s < hi or (last and s == hi)]
+        if cell:
+            err += len(cell) * abs(sum(s for s, _ in cell) / len(cell) - sum(t for _, t in cell) / len(cell))
+    return err / max(1, total)
 
 
 def main():

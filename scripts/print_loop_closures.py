@@ -2,7 +2,8 @@
 """Prints mild_lcd's loop closures as they arrive and, given ground truth, scores them at the end.
 
 ROS node. Subscribes to `loop_closure` (mild_lcd/LoopClosure). Private parameters:
-  ~min_probability  print closures whose best candidate reaches this probability (default 0.5)
+  ~min_probability  print closures whose best candidate reaches this probability (default -1: those the
+                    detector accepts, LoopCandidate.accepted, at its scoring/decision_probability)
   ~verified_only    score and print verified candidates only (default true, as mild_offline)
   ~every_keyframe   also print one line per keyframe: its best candidate or "no loop", features, time
   ~frames           exit after this many LoopClosure messages, printing the score (0: run until killed)
@@ -26,7 +27,7 @@ from mild_lcd.msg import LoopClosure
 
 class Printer:
     def __init__(self):
-        self.min_probability = rospy.get_param("~min_probability", 0.5)
+        self.min_probability = float(rospy.get_param("~min_probability", -1.0))
         self.verified_only = rospy.get_param("~verified_only", True)
         self.frames = int(rospy.get_param("~frames", 0))
         self.every_keyframe = rospy.get_param("~every_keyframe", False)
@@ -47,7 +48,7 @@ class Printer:
         kept = [c for c in msg.candidates if c.verified or not self.verified_only]
         for c in kept:
             self.rows.append((msg.query_id, c.id, c.probability))
-        if kept and kept[0].probability >= self.min_probability:
+        if kept and (kept[0].accepted if self.min_probability < 0 else kept[0].probability >= self.min_probability):
             self.closures += 1
             c = kept[0]
             print(f"loop closure: keyframe {msg.query_id} -> {c.id}  probability {c.probability:.3f}  "
@@ -66,8 +67,8 @@ class Printer:
 
     def report(self):
         """Prints the summary and, given ground truth, the score; False when scoring failed."""
-        print(f"processed {self.received} keyframes, {self.closures} loop closures at probability >= "
-              f"{self.min_probability}", flush=True)
+        rule = "accepted by the detector" if self.min_probability < 0 else f"at probability >= {self.min_probability}"
+        print(f"processed {self.received} keyframes, {self.closures} loop closures {rule}", flush=True)
         path = self.output_csv or os.path.join(tempfile.mkdtemp(prefix="mild_lcd_"), "candidates.csv")
         with open(path, "w") as f:
             f.write("query,candidate,score\n")

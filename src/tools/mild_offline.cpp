@@ -101,7 +101,7 @@ std::ofstream openDetailsCsv(const Options& opt) {
     details.open(opt.details);
     if (!details) throw mild::InvalidInput(opt.details + ": cannot write the details file");
     details << "query,candidate,probability,filter_probability,similarity,matches,inliers,inlier_ratio,coverage,"
-               "homography_share,verified,accepted,near_past,fit_skipped,eligible,saliency,reported";
+               "homography_share,verified,accepted,near_past,fit_skipped,eligible,saliency,reported,log10_nfa";
     // The scorer's feature vector, as it computes it: scripts/fit_scoring.py fits on these columns.
     for (const std::string& name : mild::CandidateScorer::featureNames()) details << "," << name;
     details << "\n";
@@ -125,7 +125,7 @@ void writeDetailsRow(std::ostream& details, size_t query, const mild::DetectionR
           << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
           << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
           << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "," << (v.fit_skipped ? 1 : 0) << ","
-          << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0);
+          << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0) << "," << v.log10_false_alarms;
   for (double x : detector.scorer().features(mild::LoopDetector::evidenceOf(c), v)) details << "," << x;
   details << "\n";
 }

@@ -1,19 +1,22 @@
 #pragma once
 
-// The loop probability a candidate is published with: the temporal filter's probability, the
-// keyframe's own evidence (its similarity's saliency among the query's eligible keyframes, and the
-// geometric verification's inliers), combined by a logistic model whose weights were fitted on
-// sequences with ground truth, rendered and real, at several keyframe steps (scripts/fit_scoring.py;
-// docs/accuracy.md says on which, and how it was cross-validated). The filter's temporal reasoning
-// enters as one term beside the keyframe's own evidence: a keyframe whose evidence is strong is not
-// outvoted by a neighbour the filter's prior prefers but whose evidence is nil. Only evidence that means the same on
-// real camera frames as on the renders enters it: the inlier count of a wrong candidate (the chance agreement of
-// matches with a fundamental matrix) is 11-12 at the median on both, while the inlier ratio, the
-// inlier coverage and the share one plane explains differ between a world of planar walls and a
-// real one (docs/accuracy.md measures each). Fitted by maximum likelihood, so that among candidates given probability
-// p about a fraction p is right on sequences like the training ones: one threshold (0.5, "more
-// likely a loop than not") for every scene, rather than a filter posterior whose scale depends on
-// the scene.
+// The loop probability a candidate is published with: P(this candidate is a true loop), nothing
+// else. The temporal filter's probability and the keyframe's own evidence -- its similarity's
+// saliency among the query's eligible keyframes, and the geometric verification measured against
+// chance (the a-contrario number of false alarms of its model, chance_agreement.hpp) -- combined by
+// a logistic model fitted by plain maximum likelihood (every candidate weighing the same, right or
+// wrong) on sequences with ground truth, rendered and real, at several keyframe steps and with
+// ORB, BRISK and AKAZE (scripts/fit_scoring.py; docs/accuracy.md says on which, and how it was
+// cross-validated). Each input is scale-free: the saliency is a robust z against the query's own
+// similarities, the significance divides out the matches, the tolerance and the image area, so
+// that a count of inliers at 200 or 2,000 matches, 160 x 120 or 640 x 480, 256 or 512 bits is
+// read on one scale. The filter's temporal reasoning enters as one term beside the keyframe's own
+// evidence: a keyframe whose evidence is strong is not outvoted by a neighbour the filter's prior
+// prefers but whose evidence is nil.
+//
+// What a wrong loop costs against a missed one is not in the probability: it is the decision
+// (scoring/decision_probability, decisionForCost), so a back-end that weighs loops by their
+// probability reads a probability, and one that acts on `accepted` gets the default's cost ratio.
 
 #include <string>
 #include <vector>
@@ -26,10 +29,10 @@ namespace mild {
 
 struct ScoringParams {
   bool enabled = true;
-  std::vector<double> weights = {0.398, 1.728, 0.230};
-  double bias = -7.737;
+  std::vector<double> weights = {0.669, 0.726, 0.778};
+  double bias = -2.523;
   std::string filter_type = "exclusive_hypotheses";
-  double decision_probability = 0.5;
+  double decision_probability = 0.909;
   int min_comparable_keyframes = 5;
 
   static constexpr int kFeatures = 3;
@@ -38,23 +41,27 @@ struct ScoringParams {
   static void declare(Self& p, Visit&& v) {
     v("enabled", p.enabled, Bounds::any(),
       "The published loop probability of every candidate: a logistic model of the filter's probability and the "
-      "keyframe's own evidence, x = [logit(filter probability), ln(inliers), ln(max(1, saliency))], saliency "
-      "being the robust z of its similarity among the query's eligible keyframes: p = 1 / (1 + exp(-(bias + "
-      "weights . x))). A candidate that fails verification is published below decision_probability (and below "
-      "0.5): its probability scaled by the lower of the two, so that it still ranks among the unverified ones, "
-      "and accepted is exactly probability >= decision_probability. Off (or verification off) gives the "
-      "filter's probability as it is.");
+      "keyframe's own evidence, x = [logit(filter probability) within +-4, ln(1 + significance), ln(max(1, saliency))], "
+      "significance being -log10 of the verified model's number of false alarms given the matches, the inlier "
+      "tolerance and the image area (0 when chance explains it) and saliency the robust z of its similarity "
+      "among the query's eligible keyframes: p = 1 / (1 + exp(-(bias + weights . x))), fitted by maximum "
+      "likelihood so that it is P(a true loop). A candidate that fails verification keeps its probability, "
+      "capped just below decision_probability, and accepted is exactly probability >= decision_probability. Off "
+      "(or verification off) gives the filter's probability as it is.");
     v("weights", p.weights, Bounds::list(kFeatures, kFeatures, Bounds::any()),
       "Fitted by scripts/fit_scoring.py on the sequences docs/accuracy.md names, real frames included, at "
-      "keyframe steps 1, 2, 5 and 10 (cross-validated leaving out whole kinds and whole steps).");
+      "keyframe steps 1, 2, 5 and 10, with ORB, BRISK and AKAZE (cross-validated leaving out whole kinds, "
+      "whole steps and each descriptor: scripts/bench_calibration.sh).");
     v("bias", p.bias, Bounds::any(), "The model's intercept.");
     v("filter_type", p.filter_type, Bounds::oneOf(temporalFilterTypes()),
       "The filter/type the weights were fitted with. The filter's probability is one of the model's inputs and "
       "another filter's means something else, so a configuration whose filter/type differs is refused (refit "
       "the weights with scripts/fit_scoring.py on that filter's runs, or turn scoring off).");
     v("decision_probability", p.decision_probability, Bounds::aboveUpTo(0, 1).runtime(),
-      "Candidates at or above this probability are accepted (LoopCandidate.accepted): \"more likely a loop than "
-      "not\". With verification on, only verified candidates reach it.");
+      "Candidates at or above this probability are accepted (LoopCandidate.accepted). The cost of a wrong loop "
+      "against a missed one belongs here, not in the probability: accepting is worth it when p >= c / (1 + c) "
+      "for a wrong loop costing c missed ones; the default 0.909 is c = 10. With verification on, only "
+      "verified candidates reach it.");
     v("min_comparable_keyframes", p.min_comparable_keyframes, Bounds::atLeast(0),
       "While a map has fewer eligible keyframes than this, the similarity's saliency and the filter's "
       "probability have nothing to compare a keyframe with: their terms take the values of no information "
@@ -88,8 +95,12 @@ class CandidateScorer {
 };
 
 // The verification gate: the probability a candidate that failed verification is published with,
-// `probability` scaled by min(decision_probability, 0.5) and strictly below it, so that it is never
-// accepted and never reads as "more likely than not", while keeping its order among the unverified.
+// its own (calibrated like every other) but strictly below decision_probability, so that it is
+// never accepted.
 double belowDecision(double probability, double decision_probability);
+
+// The decision probability for a wrong loop costing `wrong_loop_cost` missed ones: accepting is
+// worth it when (1 - p) c < p, i.e. p >= c / (1 + c) (10 gives 0.909).
+double decisionForCost(double wrong_loop_cost);
 
 }  // namespace mild

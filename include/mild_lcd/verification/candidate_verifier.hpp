@@ -19,6 +19,10 @@ struct Verification {
   int matches = 0;  // descriptor matches fed to the geometric model
   int inliers = 0;  // matches consistent with it
   double inlier_ratio = 0.0;
+  // log10 of the model's number of false alarms given the matches, the tolerance and the image area
+  // (chance_agreement.hpp): the inliers measured against chance, the same scale for every descriptor,
+  // feature budget and resolution. 0 without a model or with no more inliers than its minimal sample.
+  double log10_false_alarms = 0.0;
   double coverage = 0.0;                     // inlierCoverage, the smaller of the two images' (inlier_layout.hpp)
   double homography_share = 0.0;             // homographyShare of the inliers
   std::vector<FeatureMatch> inlier_matches;  // the matches consistent with the model

@@ -8,24 +8,39 @@
 
 namespace mild {
 
+namespace {
+const double kFilterFloor = 1.0 / (1.0 + std::exp(4.0));
+}  // namespace
+
 CandidateScorer::CandidateScorer(const ScoringParams& params) : params_((params.validate(), params)) {}
 
 std::vector<double> CandidateScorer::features(const Evidence& e, const Verification& v) const {
   // Too few keyframes to compare with: the filter and the saliency are undecided.
   const bool comparable = e.eligible_keyframes >= static_cast<size_t>(params_.min_comparable_keyframes);
-  const double p = comparable ? std::clamp(e.filter_probability, 1e-6, 1.0 - 1e-6) : 0.5;
+  // The filter's log-odds bounded to +-4 (p in [0.018, 0.982]): its prior may add to a keyframe's own
+  // evidence or take from it, never outvote it (a filter sure of a neighbour, at 1e-6 for this
+  // keyframe, would otherwise cancel a verified revisit; bounded, the kind-left-out fit ranks better).
+  const double p = comparable ? std::clamp(e.filter_probability, kFilterFloor, 1.0 - kFilterFloor) : 0.5;
   const double z = comparable && std::isfinite(e.saliency) ? std::max(1.0, e.saliency) : 1.0;
-  return {std::log(p / (1.0 - p)), std::log(std::max(1, v.inliers)), std::log(z)};
+  // The geometry's evidence against chance, scale-free (chance_agreement.hpp); its logarithm, because
+  // past a few orders of magnitude more significance says little more about a loop (an aliased
+  // place gives a model as significant as the true one).
+  const double significance = std::isfinite(v.log10_false_alarms) ? std::max(0.0, -v.log10_false_alarms) : 0.0;
+  return {std::log(p / (1.0 - p)), std::log1p(significance), std::log(z)};
 }
 
 const std::vector<std::string>& CandidateScorer::featureNames() {
-  static const std::vector<std::string> names = {"x_filter_logodds", "x_ln_inliers", "x_ln_saliency"};
+  static const std::vector<std::string> names = {"x_filter_logodds", "x_ln_significance", "x_ln_saliency"};
   return names;
 }
 
 double belowDecision(double probability, double decision_probability) {
-  const double cap = std::min(decision_probability, 0.5);
-  return std::min(std::clamp(probability, 0.0, 1.0) * cap, std::nextafter(cap, 0.0));
+  return std::min(std::clamp(probability, 0.0, 1.0), std::nextafter(decision_probability, 0.0));
+}
+
+double decisionForCost(double wrong_loop_cost) {
+  // Accept when the expected cost of accepting, (1 - p) c, is below that of missing, p.
+  return wrong_loop_cost / (1.0 + wrong_loop_cost);
 }
 
 double CandidateScorer::probability(const Evidence& e, const Verification& v) const {

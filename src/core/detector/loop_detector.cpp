@@ -9,6 +9,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/stopwatch.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/verification/chance_agreement.hpp"
 
 namespace mild {
 
@@ -270,7 +271,8 @@ bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, si
   // inliers are a subset of the matches; the scorer is monotone in them, either way).
   Verification none, all;
   all.inliers = matches;
-  all.verified = true;  // the best case: every match an inlier, and verified
+  all.verified = true;  // the best case: every match an inlier, and verified, at the smallest chance
+  all.log10_false_alarms = log10FalseAlarms(matches, matches, kLeastChanceInlierProbability, 5);
   const LoopCandidate& c = candidates[i];
   const double reachable = std::max(publishedProbability(c, none), publishedProbability(c, all));
   if (reachable >= params_.scoring.decision_probability) return true;  // it could be accepted

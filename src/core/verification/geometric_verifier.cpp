@@ -9,6 +9,7 @@
 #include <opencv2/core/utility.hpp>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/verification/chance_agreement.hpp"
 #include "mild_lcd/verification/inlier_layout.hpp"
 
 namespace mild {
@@ -255,6 +256,15 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   out.verification.inlier_candidate_points = t_in;
   out.verification.inliers = inliers;
   out.verification.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(out.matches.size());
+  {
+    // The tolerance of the fit in pixels, over the area either image's keypoints occupy.
+    const double chance = (chanceInlierProbability(query, params_.ransac_threshold) +
+                           chanceInlierProbability(train, params_.ransac_threshold)) /
+                          2.0;
+    const bool essential_model = query_camera.known() && train_camera.known();  // five-point, else seven-point samples
+    out.verification.log10_false_alarms =
+        log10FalseAlarms(out.verification.matches, inliers, chance, essential_model ? 5 : 7);
+  }
   out.verification.verified = inliers >= params_.min_inliers;
   if (!out.verification.verified) return out;
   // The layout of the inliers describes a loop, not a rejection: a homography fit per rejected

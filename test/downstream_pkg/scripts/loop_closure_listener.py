@@ -7,7 +7,7 @@ from mild_lcd.msg import LoopClosure
 
 def on_loop_closure(msg):
     for c in msg.candidates:
-        if not c.accepted:  # verified and probability >= 0.5: act on it
+        if not c.accepted:  # verified, probability >= the decision (0.909): act on it
             continue
         rospy.loginfo("keyframe %d closes a loop with %d (p=%g, %d inliers)", msg.query_id, c.id, c.probability, c.inliers)
         if c.has_relative_pose:  # the candidate camera in the query camera's optical frame

@@ -5,7 +5,7 @@
 
 void onLoopClosure(const mild_lcd::LoopClosure::ConstPtr& msg) {
   for (const mild_lcd::LoopCandidate& c : msg->candidates) {
-    if (!c.accepted) continue;  // verified and probability >= 0.5: act on it
+    if (!c.accepted) continue;  // verified, probability >= the decision (0.909): act on it
     ROS_INFO_STREAM("keyframe " << msg->query_id << " closes a loop with " << c.id << " (p=" << c.probability << ", "
                                 << c.inliers << " inliers)");
     if (c.has_relative_pose) {  // the candidate camera in the query camera's optical frame

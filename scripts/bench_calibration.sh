@@ -1,0 +1,83 @@
+#!/bin/bash
+# Is the published probability a probability, on every kind of data, keyframe step and descriptor?
+# Runs mild_offline (every candidate verified and written with its scorer features, --details
+# --fit-every-candidate) over the bench's five public rendered sequences at keyframe steps 1, 2, 5
+# and 10 and the two real ones at 1 and 2 (../shared/bench/subsample.py), once per descriptor
+# (features/type orb, brisk, akaze; nothing else changed), then scripts/calibration_report.py
+# prints: the ECE of each run by the bench's referee (../shared/bench/calibration.py), the ECE and
+# accuracy of each run with the scorer refitted without its kind (real frames, each render kind,
+# each descriptor, each step) and the reliability diagrams per kind (docs/reliability_*.png).
+#   ./scripts/bench_calibration.sh                          # everything (about 30 minutes on two cores)
+#   DESCRIPTORS=orb STEPS=1,2 ./scripts/bench_calibration.sh
+#   CONFIG=my.yaml ./scripts/bench_calibration.sh           # another configuration (features/type is set per descriptor)
+#   FIT=1 ./scripts/bench_calibration.sh                    # also print the scorer fitted on every run (the default's)
+set -eo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+
+BENCH="${BENCH:-$REPO/../shared/bench}"
+CACHE="${MILD_BENCH_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mild_lcd/bench}"
+OUT="${OUT:-$BUILD_DIR/bench_calibration}"
+JOBS="${JOBS:-2}"
+DESCRIPTORS="${DESCRIPTORS:-orb,brisk,akaze}"
+STEPS="${STEPS:-1,2,5,10}"
+PLOTS="${PLOTS:-$OUT}"
+mild_install_deps
+"$REPO/scripts/install_deps.sh" "$REPO/scripts/debian-packages-bench.txt"  # numpy, matplotlib
+mild_configure_and_build --target mild_offline >/dev/null
+BIN="$BUILD_DIR/devel/lib/mild_lcd"
+mkdir -p "$OUT" "$CACHE/steps"
+
+runs=()  # descriptor/name=folder
+add() {  # source folder, name, step
+  local dir="$CACHE/steps/${2}_k$3"
+  [[ -f "$dir/gt_loops.txt" ]] || /usr/bin/python3 "$BENCH/subsample.py" "$1" "$3" "$dir" >/dev/null
+  for d in ${DESCRIPTORS//,/ }; do runs+=("$d/${2}_k$3=$dir"); done
+}
+for k in ${STEPS//,/ }; do
+  for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do add "$BENCH/$s" "$s" "$k"; done
+  if [[ $k -le 2 ]]; then
+    for s in gp_day_a gp_night_a; do add "$BENCH/real/$s" "$s" "$k"; done
+  fi
+done
+
+for d in ${DESCRIPTORS//,/ }; do
+  mkdir -p "$OUT/$d"
+  # The user's configuration (or the defaults) with only features/type changed.
+  /usr/bin/python3 - "${CONFIG:-}" "$d" >"$OUT/$d/config.yaml" <<'EOF'
+import sys
+path, kind = sys.argv[1], sys.argv[2]
+lines = open(path).read().splitlines() if path else []
+out, in_features, done = [], False, False
+for line in lines:
+    if line.startswith("features:"):
+        in_features = True
+        out.append(line)
+        out.append(f"  type: {kind}")
+        done = True
+        continue
+    if in_features and line.strip().startswith("type:"):
+        continue
+    if line and not line.startswith(" ") and not line.startswith("#"):
+        in_features = False
+    out.append(line)
+if not done:
+    out += ["features:", f"  type: {kind}"]
+print("\n".join(out))
+EOF
+done
+
+export BIN OUT
+run_one() {  # descriptor/name=folder
+  local id=${1%%=*} dir=${1#*=}
+  local d=${id%%/*}
+  [[ -f "$OUT/$id.details.csv" && "$OUT/$id.details.csv" -nt "$BIN/mild_offline" && -z "${FORCE:-}" ]] && return 0
+  "$BIN/mild_offline" --images "$dir" --config "$OUT/$d/config.yaml" --output "$OUT/$id.csv" \
+    --details "$OUT/$id.details.csv.tmp" --fit-every-candidate --stats "$OUT/$id.json" >"$OUT/$id.log" 2>&1 \
+    || { echo "[mild_lcd] mild_offline failed on $id (see $OUT/$id.log)" >&2; return 1; }
+  mv "$OUT/$id.details.csv.tmp" "$OUT/$id.details.csv"
+}
+export -f run_one
+printf '%s\n' "${runs[@]}" | xargs -P "$JOBS" -I{} bash -c 'run_one "$@"' _ {}
+fit=()
+[[ -n "${FIT:-}" ]] && fit=(--fit)
+/usr/bin/python3 "$REPO/scripts/calibration_report.py" --bench "$BENCH" --results "$OUT" --plots "$PLOTS" "${fit[@]}" "${runs[@]}"

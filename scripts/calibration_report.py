@@ -1,0 +1,210 @@
+#!/usr/bin/python3
+"""Calibration of the published loop probability, per run and with each kind of data left out.
+
+Usage (scripts/bench_calibration.sh passes these):
+  calibration_report.py --bench BENCH --results DIR [--plots DIR] [--fit] [--decision P] DESC/NAME=SEQUENCE_DIR ...
+
+DIR/DESC/NAME.csv are mild_offline's candidates with the default scorer, DIR/DESC/NAME.details.csv
+every candidate with its scorer features (x_* columns, candidate_scorer.cpp) and --fit-every-candidate.
+Prints Markdown tables:
+  1. each run as published: the ECE by the bench's referee (BENCH/calibration.py), recall@100%P / AP
+     (BENCH/score.py), and precision / recall of each query's best candidate at the decision
+     probability (scoring/decision_probability, `accepted`);
+  2. the scorer refitted (scripts/fit_scoring.py, the default's recipe) without each kind in turn
+     -- real frames, each render kind, each descriptor, each keyframe step -- and scored on what was
+     left out: ECE (the referee's bins), recall@100%P, AP;
+and draws a reliability diagram per kind (real day, real night, each render kind, each descriptor)
+from the published candidates into --plots. With --fit, prints the scorer fitted on every run.
+"""
+import argparse
+import json
+import math
+import os
+import re
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+import fit_scoring  # noqa: E402
+
+EDGES = (0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)  # the referee's default bins
+
+
+def ece_of(scored, edges=EDGES):
+    """scored: (probability, is_true) of each query's best candidate; the referee's ECE."""
+    total, ece = len(scored), 0.0
+    for k, (lo, hi) in enumerate(zip(edges, edges[1:])):
+        last = k == len(edges) - 2
+        cell = [(s, t) for s, t in scored if lo <= s < hi or (last and s == hi)]
+        if cell:
+            ece += len(cell) * abs(sum(s for s, _ in cell) / len(cell) - sum(t for _, t in cell) / len(cell))
+    return ece / max(1, total)
+
+
+def published_metrics(bench, seq, csv, decision):
+    sys.path.insert(0, bench)
+    import score  # noqa: E402
+    truth, dont_care, n_queries = load_truth(seq)
+    best = score.load_candidates(csv, 40)
+    ranked = sorted(((s, (i, j) in truth) for i, (j, s) in best.items() if (i, j) not in dont_care),
+                    key=lambda v: -v[0])
+    right = sum(1 for s, t in ranked if s >= decision and t)
+    wrong = sum(1 for s, t in ranked if s >= decision and not t)
+    return {"precision_at_decision": right / (right + wrong) if right + wrong else float("nan"),
+            "recall_at_decision": right / max(1, n_queries), "wrong_at_decision": wrong}
+
+
+def load_truth(seq):
+    truth, dont_care, queries = fit_scoring.load_gt(seq)
+    return truth, dont_care, len(queries)
+
+
+def score_json(bench, seq, csv):
+    import subprocess
+    out = subprocess.run(["/usr/bin/python3", f"{bench}/score.py", seq, csv, "--json"], capture_output=True,
+                         text=True)
+    try:
+        return json.loads(out.stdout)
+    except ValueError:
+        return {}
+
+
+def kind_name(name):
+    base = re.sub(r"_k\d+$", "", name)
+    if base.startswith("gp_") or base.startswith("real_"):
+        return "real night" if "night" in base else "real day"
+    return re.sub(r"_s\d+$", "", base)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--bench", required=True)
+    ap.add_argument("--results", required=True)
+    ap.add_argument("--plots")
+    ap.add_argument("--fit", action="store_true")
+    ap.add_argument("--decision", type=float, default=None,
+                    help="the decision probability (default: config/default.yaml's)")
+    ap.add_argument("runs", nargs="+")
+    a = ap.parse_args()
+    decision = a.decision if a.decision is not None else default_decision()
+    fit_scoring.DECISION = decision
+    runs = []
+    for spec in a.runs:
+        rid, seq = spec.split("=", 1)
+        desc, name = rid.split("/", 1)
+        run = fit_scoring.load_run(f"{name}={seq}:{a.results}/{rid}.details.csv")
+        run.update({"id": rid, "descriptor": desc, "seq": seq, "csv": f"{a.results}/{rid}.csv",
+                    "label": kind_name(name)})
+        runs.append(run)
+
+    # 1. As published.
+    sys.path.insert(0, a.bench)
+    import calibration  # noqa: E402
+    print(f"\nAs published (decision probability {decision}): ECE by ../shared/bench/calibration.py, "
+          "recall@100%P / AP by score.py, each query's best candidate at the decision.\n")
+    print("| descriptor | sequence | step | scored | ECE | recall@100%P / AP | precision / recall at the decision |")
+    print("|---|---|---|---|---|---|---|")
+    published = {}
+    for r in runs:
+        c = calibration.calibration(r["seq"], r["csv"])
+        s = score_json(a.bench, r["seq"], r["csv"])
+        m = published_metrics(a.bench, r["seq"], r["csv"], decision)
+        published[r["id"]] = {"ece": c["ece"], "scored": c["scored"], **s, **m}
+        prec = "–" if math.isnan(m["precision_at_decision"]) else f"{m['precision_at_decision']:.3f}"
+        print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | {c['scored']} | "
+              f"{c['ece']:.3f} | {s.get('recall_at_100_precision', float('nan')):.3f} / "
+              f"{s.get('average_precision', float('nan')):.3f} | {prec} ({m['wrong_at_decision']} wrong) / "
+              f"{m['recall_at_decision']:.3f} |")
+
+    # 2. Left out.
+    groupings = [("kind", lambda r: r["kind"]), ("descriptor", lambda r: r["descriptor"]),
+                 ("step", lambda r: r["step"])]
+    print("\nThe scorer refitted without each kind, descriptor and step in turn (scripts/fit_scoring.py), "
+          "scored on what was left out: ECE (the referee's bins) / recall@100%P / AP.\n")
+    heads = [g for g, key in groupings if len({key(r) for r in runs}) > 1]
+    print("| descriptor | sequence | step | " + " | ".join(f"{h} left out" for h in heads) + " |")
+    print("|---|---|---|" + "---|" * len(heads))
+    left = {r["id"]: {} for r in runs}
+    for g, key in groupings:
+        if g not in heads:
+            continue
+        for value in sorted({key(r) for r in runs}, key=str):
+            w, b = fit_scoring.fit([r for r in runs if key(r) != value], fit_scoring.L2)
+            for r in (r for r in runs if key(r) == value):
+                m = fit_scoring.metrics(r, w, b)
+                left[r["id"]][g] = (fit_scoring.ece(r, w, b), m["recall_at_100_precision"], m["average_precision"])
+    for r in runs:
+        cells = [f"{v[0]:.3f} / {v[1]:.3f} / {v[2]:.3f}" for v in (left[r["id"]][h] for h in heads)]
+        print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | " + " | ".join(cells) + " |")
+    worst = {h: max(left[r["id"]][h][0] for r in runs) for h in heads}
+    print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" for h, v in worst.items()))
+
+    if a.plots:
+        plot(a.plots, runs)
+    if a.fit:
+        w, b = fit_scoring.fit(runs, fit_scoring.L2)
+        print("\nscoring (fitted on every run above):")
+        print(f"  # features: {', '.join(runs[0]['features'])}")
+        print(f"  weights: [{', '.join(f'{v:.3f}' for v in w)}]")
+        print(f"  bias: {b:.3f}")
+
+
+def default_decision():
+    for line in open(os.path.join(HERE, "..", "config", "default.yaml")):
+        m = re.match(r"\s+decision_probability:\s*([\d.]+)", line)
+        if m:
+            return float(m.group(1))
+    return 0.5
+
+
+def plot(folder, runs):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    sys.path.insert(0, os.path.join(HERE))
+    os.makedirs(folder, exist_ok=True)
+    sys_score = __import__("score")
+    panels = {}
+    for r in runs:
+        truth, dont_care, _ = fit_scoring.load_gt(r["seq"])
+        best = sys_score.load_candidates(r["csv"], 40)
+        scored = [(s, (i, j) in truth) for i, (j, s) in best.items() if (i, j) not in dont_care]
+        panels.setdefault(("kind", r["label"]), []).extend(scored)
+        panels.setdefault(("descriptor", r["descriptor"]), []).extend(scored)
+    for group in ("kind", "descriptor"):
+        names = [n for g, n in panels if g == group]
+        fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.9), dpi=110, squeeze=False)
+        for ax, n in zip(axes[0], names):
+            scored = panels[(group, n)]
+            s = np.array([v for v, _ in scored])
+            t = np.array([v for _, v in scored], dtype=float)
+            edges = np.linspace(0, 1, 11)
+            idx = np.minimum((s * 10).astype(int), 9)
+            xs, ys, ns = [], [], []
+            for k in range(10):
+                m = idx == k
+                if m.sum():
+                    xs.append(s[m].mean())
+                    ys.append(t[m].mean())
+                    ns.append(int(m.sum()))
+            ax.plot([0, 1], [0, 1], ":", color="grey", lw=1)
+            ax.bar(edges[:-1] + 0.05, [t[idx == k].mean() if (idx == k).any() else 0 for k in range(10)], width=0.09,
+                   color="tab:blue", alpha=0.25)
+            ax.plot(xs, ys, "o-", color="tab:blue", ms=3)
+            for x, y, c in zip(xs, ys, ns):
+                ax.annotate(str(c), (x, y), textcoords="offset points", xytext=(2, -9), fontsize=6)
+            ax.set_title(f"{n}: {len(scored)} queries\nECE {ece_of(scored):.3f}", fontsize=8)
+            ax.set_xlim(0, 1)
+            ax.set_ylim(0, 1.02)
+            ax.tick_params(labelsize=6)
+            ax.set_xlabel("published probability", fontsize=7)
+        axes[0][0].set_ylabel("fraction true (best candidate)", fontsize=7)
+        fig.tight_layout()
+        fig.savefig(os.path.join(folder, f"reliability_by_{group}.png"))
+        plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
