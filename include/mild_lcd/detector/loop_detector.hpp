@@ -114,6 +114,9 @@ struct StepStats {
   size_t features = 0;
   size_t eligible_keyframes = 0;
   size_t near_past_keyframes = 0;  // removed from the eligible ones by the near-past band
+  // Its depths that were given but are not plausible (finite, not 0, outside [kMinDepthMetres,
+  // kMaxDepthMetres]): taken as unknown (features/features.hpp).
+  size_t depths_out_of_range = 0;
   QueryStats query;
 };
 
