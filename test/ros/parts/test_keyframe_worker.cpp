@@ -54,6 +54,24 @@ TEST(Worker, CountsAndSaysDepthsOutOfRange) {
   EXPECT_NE(answers.events[0].find("2 depths outside"), std::string::npos) << answers.events[0];
 }
 
+// Issue 49 item 3: a stamp below the previous keyframe's is counted and said; the keyframe answered.
+TEST(Worker, CountsAndSaysAClockThatStepsBack) {
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
+  Answers answers;
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, recordingHooks(answers));
+  worker.start();
+  for (const double stamp : {2000.0, 2001.0, 5.0, 6.0, 6.0})
+    worker.push(keyframeInput(keyframeMsg(stamp, std::nullopt)));
+  worker.waitIdle();
+  const WorkerCounters c = worker.counters();
+  EXPECT_EQ(c.processed, 5u);
+  EXPECT_EQ(c.clock_steps_back, 1u) << "one step back; an equal stamp is none";
+  std::lock_guard<std::mutex> lock(answers.mutex);
+  ASSERT_EQ(answers.events.size(), 6u);
+  EXPECT_NE(answers.events[2].find("stepped back"), std::string::npos) << answers.events[2];
+}
+
 TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   for (const bool extraction_thread : {false, true}) {
     SCOPED_TRACE(extraction_thread ? "extraction thread" : "one thread");
