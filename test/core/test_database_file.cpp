@@ -316,7 +316,7 @@ TEST_F(DatabaseFile, KillingASaveAtAnyMomentLeavesALoadableFile) {
     EXPECT_NO_THROW(loadMap(check.map(), target, true));
   }
   for (const auto& e : fs::directory_iterator(dir_)) {
-    if (e.path().string().find(".tmp.") != std::string::npos) fs::remove(e.path());  // a killed writer's leftovers
+    if (mild::isTemporaryFileName(e.path().filename().string())) fs::remove(e.path());  // a killed writer's leftovers
   }
   EXPECT_GT(saw_small, 0u);
   EXPECT_GT(saw_large, 0u);

@@ -24,6 +24,7 @@
 #include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "random_descriptors.hpp"
 
@@ -82,9 +83,17 @@ class HostileFiles : public mild::test::ScratchFolderTest {
   size_t temporaries(const std::string& target) const {
     size_t n = 0;
     for (const auto& e : fs::directory_iterator(dir_)) {
-      n += e.path().filename().string().rfind(fs::path(target).filename().string() + ".tmp.", 0) == 0 ? 1 : 0;
+      n += e.path().filename().string().rfind(temporaryPrefix(target), 0) == 0 ? 1 : 0;
     }
     return n;
+  }
+  // The name a save to `target` gives its temporary files, less their 16 hex digits.
+  static std::string temporaryPrefix(const std::string& target) {
+    return "." + fs::path(target).filename().string() + ".mild-lcd-save.";
+  }
+  // What a killed save leaves: the magic, then part of a map.
+  static void halfASave(const std::string& file) {
+    std::ofstream(file, std::ios::binary) << std::string("MILDLCD\0", 8) << "half a database";
   }
 };
 
@@ -207,19 +216,74 @@ TEST_F(HostileFiles, ConcurrentSavesToOnePathNeverCorruptEachOther) {
 TEST_F(HostileFiles, TemporaryFilesOfKilledSavesAreRemovedByTheNextSave) {
   auto detector = detectorWith(3);
   const std::string target = path("map.mild");
-  const std::string stale = target + ".tmp.0badf00d", fresh = target + ".tmp.0000beef",
-                    locked = target + ".tmp.000c0ffe";
-  for (const auto& f : {stale, fresh, locked}) std::ofstream(f) << "half a database";
+  const std::string prefix = path(temporaryPrefix(target));
+  const std::string stale = prefix + "000000000badf00d", fresh = prefix + "000000000000beef",
+                    locked = prefix + "00000000000c0ffe", empty = prefix + "00000000deadbeef";
+  for (const auto& f : {stale, fresh, locked}) halfASave(f);
+  std::ofstream{empty};  // killed between creating the file and writing to it
   age(stale, 3600);
+  age(empty, 3600);
   age(locked, 3600);
   const int held = open(locked.c_str(), O_RDONLY);
   ASSERT_EQ(flock(held, LOCK_EX), 0);  // a save in progress elsewhere holds its lock
   saveMap(detector->map(), target);
   EXPECT_FALSE(fs::exists(stale)) << "abandoned an hour ago, unlocked: removed";
+  EXPECT_FALSE(fs::exists(empty)) << "and the empty one";
   EXPECT_TRUE(fs::exists(fresh)) << "seconds old: may belong to a save that has not locked it yet";
   EXPECT_TRUE(fs::exists(locked)) << "locked: a save in progress";
   close(held);
   EXPECT_EQ(readMapFile(target).records.size(), 3u);
+}
+
+// Issue 49 item 2: a user's files named like the temporary files of earlier versions
+// ("<name>.tmp.<8 characters>"), hours old and unlocked, are the user's: a save never removes them.
+TEST_F(HostileFiles, AUsersFilesNamedLikeTemporariesAreNeverRemoved) {
+  auto detector = detectorWith(3);
+  const std::vector<std::pair<std::string, std::string>> kept = {{"snap.mild", "snap.mild.tmp.20261205"},
+                                                                 {"site.mild", "site.mild.tmp.backup01"},
+                                                                 {"site.mild", "site.mild.tmp.0badf00d"}};
+  for (const auto& [target, user_file] : kept) {
+    saveMap(detectorWith(2, 100)->map(), path(user_file));  // a map the user saved under that name
+    age(path(user_file), 3600);
+  }
+  for (const auto& [target, user_file] : kept) saveMap(detector->map(), path(target));
+  for (const auto& [target, user_file] : kept) {
+    ASSERT_TRUE(fs::exists(path(user_file))) << user_file << " was removed by a save to " << target;
+    EXPECT_EQ(readMapFile(path(user_file)).records.size(), 2u) << user_file;
+  }
+
+  // Under a temporary's own name, only what is provably a killed save's goes: not a file of other
+  // content, not one with a second name, not one of another pattern (15 or 17 digits, capitals).
+  const std::string prefix = path(temporaryPrefix("snap.mild"));
+  const std::string other_content = prefix + "0123456789abcdef", linked = prefix + "00000000000000aa",
+                    short_name = prefix + "0123456789abcde", long_name = prefix + "0123456789abcdef0",
+                    capitals = prefix + "0123456789ABCDEF";
+  std::ofstream(other_content) << "a user's notes";
+  halfASave(path("second_name"));
+  fs::create_hard_link(path("second_name"), linked);
+  for (const auto& f : {short_name, long_name, capitals}) halfASave(f);
+  for (const auto& f : {other_content, linked, short_name, long_name, capitals}) age(f, 3600);
+  saveMap(detector->map(), path("snap.mild"));
+  for (const auto& f : {other_content, linked, short_name, long_name, capitals}) {
+    EXPECT_TRUE(fs::exists(f)) << f << " is not provably a killed save's, and was removed";
+  }
+  EXPECT_EQ(contents(other_content), "a user's notes");
+
+  // Nor can a client make such a file: the name is refused for saving and loading.
+  const DatabaseDirectory folder(dir_.string());
+  for (const bool saving : {true, false}) {
+    try {
+      folder.resolve(fs::path(prefix).filename().string() + "0123456789abcdef", saving);
+      FAIL() << "a temporary file's name was accepted as a map's";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("reserved"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_NO_THROW(folder.resolve("snap.mild.tmp.20261205", true)) << "a user's name is a user's name";
+  // A saved file's name leaves room for its temporary's (32 bytes more, at most 255 in all).
+  EXPECT_NO_THROW(saveMap(detector->map(), folder.resolve(std::string(223, 'a'), true)));
+  EXPECT_THROW(folder.resolve(std::string(224, 'a'), true), InvalidInput);
+  EXPECT_NO_THROW(folder.resolve(std::string(255, 'a'), false)) << "reading has no temporary";
 }
 
 // A link planted under a temporary name (a guess at the next one, or an old one's) is not followed:
@@ -228,7 +292,7 @@ TEST_F(HostileFiles, LinksPlantedAtTemporaryNamesAreNotFollowed) {
   auto detector = detectorWith(3);
   const std::string target = path("map.mild");
   std::ofstream(path("victim.txt")) << "precious";
-  const std::string planted = target + ".tmp.12345678";
+  const std::string planted = path(temporaryPrefix(target)) + "0000000012345678";
   fs::create_symlink(path("victim.txt"), planted);
   age(planted, 3600);
   for (int i = 0; i < 5; ++i) saveMap(detector->map(), target);

@@ -445,6 +445,48 @@ TEST(LoopDetector, TheVerifierSeesEachKeyframesCameraAndTheQuerysDepths) {
   EXPECT_GT(seen->cameras.size(), 0u);
 }
 
+// Issue 49 item 4: depths are bounded. Every keypoint of the fixture with a depth of 1e30 m (or
+// 1e-30 m) gave loops published as metric, 1e29 m (0 m) long; now such depths are unknown and
+// counted, and the poses are up to scale, as without depth. Plausible depths still give metric ones.
+TEST(LoopDetector, DepthsOutsideTheirRangeAreUnknownAndCounted) {
+  const std::vector<cv::Mat> frames = fixtureFrames();
+  const DetectorParams p = fixtureParams();
+  const OrbExtractor orb(p.features.section<OrbParams>());
+  for (const float depth : {1e30f, 1e-30f, 5.0f}) {
+    LoopDetector detector(p);
+    size_t accepted = 0, metric = 0, counted = 0;
+    double longest = 0.0;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      Features f = orb.extract(frames[i]);
+      f.camera = CameraIntrinsics{256.0, 256.0, 159.5, 119.5};
+      f.depths.assign(f.keypoints.size(), depth);
+      f.depths.front() = std::numeric_limits<float>::quiet_NaN();  // unknown, not counted
+      const size_t given = f.depths.size();
+      const DetectionResult r = detector.process(Observation::ofFeatures(std::move(f), 0.5 * i));
+      const bool plausible = depth == 5.0f;
+      EXPECT_EQ(r.stats.depths_out_of_range, plausible ? 0u : given - 1) << "depth " << depth;
+      counted += r.stats.depths_out_of_range;
+      for (const LoopCandidate& c : r.candidates) {
+        if (!c.accepted) continue;
+        ++accepted;
+        if (c.verification.pose.metric) {
+          ++metric;
+          longest = std::max(longest, cv::norm(c.verification.pose.translation));
+        }
+      }
+    }
+    ASSERT_GT(accepted, 5u) << "depth " << depth;
+    if (depth == 5.0f) {
+      EXPECT_GT(metric, 0u) << "plausible depths give metric poses";
+      EXPECT_LT(longest, 100.0);
+    } else {
+      EXPECT_EQ(metric, 0u) << "depth " << depth << ": " << metric << " of " << accepted
+                            << " accepted loops published as metric, up to " << longest << " m";
+      EXPECT_GT(counted, 0u);
+    }
+  }
+}
+
 TEST(LoopDetector, RetunesWhatIsSafeWhileRunningAndRefusesTheRest) {
   const std::vector<cv::Mat> frames = fixtureFrames();
   LoopDetector detector(fixtureParams());

@@ -121,6 +121,36 @@ TEST(RelativePose, DepthOfTheQuerysKeypointsGivesAMetricPose) {
   EXPECT_FALSE(mild::relativePoseFromDepth(v.query, sparse, v.candidate, kCamera, other, 3.0, 15).valid);
 }
 
+// Issue 49 item 4: depths outside [kMinDepthMetres, kMaxDepthMetres] are unknown (1e30 m gave
+// translations of 1e27-1e29 m published as metric, 1e-30 m exactly 0 m), and a metric translation
+// longer than kMaxDepthMetres is not published as one.
+TEST(RelativePose, DepthsOutOfRangeAreUnknownAndAnAbsurdTranslationIsNotMetric) {
+  const cv::Matx33d other(300.0, 0.0, 170.0, 0.0, 298.0, 125.0, 0.0, 0.0, 1.0);
+  const TwoViews v = twoViews(kCamera, other, 0.5, 0.2);
+  for (const float scale : {1e30f, 1e-30f, 1e5f, 1e-4f}) {
+    std::vector<float> scaled = v.depths;
+    for (float& z : scaled) z *= scale;
+    const RelativePose pose = mild::relativePoseFromDepth(v.query, scaled, v.candidate, kCamera, other, 3.0, 15);
+    EXPECT_FALSE(pose.valid) << "depths x " << scale << ": translation " << pose.translation;
+  }
+
+  // A scene in range (5-9 km away) seen from 15 km further back: every depth is plausible, the
+  // translation is not.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> lateral(-2000.0, 2000.0), depth(5000.0, 9000.0);
+  const cv::Vec3d centre(0.0, 0.0, -15000.0);
+  std::vector<cv::Point2f> query, candidate;
+  std::vector<float> depths;
+  for (int i = 0; i < 200; ++i) {
+    const cv::Vec3d x(lateral(rng), lateral(rng) * 0.5, depth(rng));
+    query.push_back(project(x));
+    candidate.push_back(project(x - centre));
+    depths.push_back(static_cast<float>(x[2]));
+  }
+  const RelativePose far = mild::relativePoseFromDepth(query, depths, candidate, kCamera, kCamera, 3.0, 15);
+  EXPECT_FALSE(far.valid) << "a loop between cameras " << cv::norm(far.translation) << " m apart";
+}
+
 mild::Features keypointsOnly(const std::vector<cv::Point2f>& points, const mild::CameraIntrinsics& camera) {
   mild::Features f;
   for (const cv::Point2f& p : points) f.keypoints.emplace_back(p, 31.0f);

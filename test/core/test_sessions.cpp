@@ -7,6 +7,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -15,10 +16,12 @@
 
 #include "../common/scratch_folder.hpp"
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "random_descriptors.hpp"
 #include "test_images.hpp"
 
 namespace fs = std::filesystem;
@@ -158,6 +161,103 @@ TEST_F(Sessions, AMergedMapKeepsBothMapsAndItsLoopsAreFound) {
   ASSERT_EQ(state.records.size(), 300u);  // 150 merged, 150 of the running session
   EXPECT_EQ(state.records.front().session, 1u);
   EXPECT_EQ(state.records.back().session, 0u);
+}
+
+// The sample's features, extracted once: the stamp tests below replay them under other clocks.
+const std::vector<Features>& sampleFeatures() {
+  static const std::vector<Features> features = [] {
+    const FeatureFrontEnd front_end(DetectorParams{}.features);
+    std::vector<Features> out;
+    for (const cv::Mat& frame : frames()) {
+      out.push_back(front_end.extract(Observation::ofImage(frame, PixelFormat::kGray, 0.0)).features);
+    }
+    return out;
+  }();
+  return features;
+}
+
+// Query id -> candidate id of the candidates a run found within its own session.
+using LoopsWithin = std::vector<std::pair<uint64_t, uint64_t>>;
+
+// The sample (ids 0..299) stamped stamp(i), with detector/exclusion_seconds 1, on a detector
+// `prepare` has given a map first (or not).
+LoopsWithin loopsWithinTheRunningSession(const std::function<double(int)>& stamp,
+                                         const std::function<void(LoopDetector&)>& prepare,
+                                         std::vector<DetectionResult>* results = nullptr) {
+  DetectorParams p;
+  p.candidates.exclusion_seconds = 1.0;
+  LoopDetector d(p);
+  prepare(d);
+  LoopsWithin loops;
+  for (int i = 0; i < kFrames; ++i) {
+    DetectionResult r = d.process(Observation::ofFeatures(sampleFeatures()[i], stamp(i), static_cast<uint64_t>(i)));
+    for (const LoopCandidate& c : r.candidates) {
+      if (c.session == r.query_session) loops.emplace_back(r.query_id, c.id);
+    }
+    if (results) results->push_back(std::move(r));
+  }
+  return loops;
+}
+
+// A map of another place: 300 keyframes of random features, ids from 10,000, stamped from `first`
+// at 10 Hz.
+void saveAnotherPlace(const std::string& file, double first) {
+  DetectorParams p;
+  p.verification.enabled = false;
+  LoopDetector other(p);
+  std::mt19937_64 rng(5);
+  for (int k = 0; k < 300; ++k) {
+    Features f;
+    for (int i = 0; i < 200; ++i) {
+      f.descriptors.push_back(test::randomDescriptor(rng));
+      f.keypoints.emplace_back(1.0f * i, 1.0f * k, 7.0f);
+    }
+    other.process(Observation::ofFeatures(std::move(f), first + 0.1 * k, 10000 + static_cast<uint64_t>(k)));
+  }
+  saveMap(other.map(), file);
+}
+
+// Issue 49 item 3: the temporal exclusion compares stamps within the running session only. A stored
+// session stamped later than the new run (a map recorded on wall time, the run on sim time) used to
+// leave no candidate within the running session at all.
+TEST_F(Sessions, AStoredSessionStampedLaterThanTheRunningOneHidesNoneOfItsLoops) {
+  const auto sample_time = [](int i) { return 0.1 * i; };
+  saveAnotherPlace(path("earlier.mild"), -2000.0);
+  saveAnotherPlace(path("later.mild"), 2000.0);
+  const LoopsWithin alone = loopsWithinTheRunningSession(sample_time, [](LoopDetector&) {});
+  const LoopsWithin after_earlier = loopsWithinTheRunningSession(
+      sample_time, [&](LoopDetector& d) { loadMap(d.map(), path("earlier.mild"), false); });
+  const LoopsWithin after_later =
+      loopsWithinTheRunningSession(sample_time, [&](LoopDetector& d) { loadMap(d.map(), path("later.mild"), false); });
+  const LoopsWithin merged_later =
+      loopsWithinTheRunningSession(sample_time, [&](LoopDetector& d) { mergeMap(d.map(), path("later.mild")); });
+  std::cout << "candidates within the running session: alone " << alone.size() << ", after a map stamped earlier "
+            << after_earlier.size() << ", later " << after_later.size() << ", merged later " << merged_later.size()
+            << "\n";
+  ASSERT_GT(alone.size(), 300u);
+  EXPECT_GT(after_earlier.size(), alone.size() * 9 / 10) << "another place's map takes few of the candidates";
+  EXPECT_EQ(after_later, after_earlier) << "the stored session's stamps are never compared with the running one's";
+  EXPECT_EQ(merged_later, after_earlier);
+}
+
+// A clock that steps back within the running session (a replay restarted, sim time reset): the
+// detector is not blinded to what came before the step. The step counts as no time passing, so the
+// results are those of a clock that went on (here the frame exclusion, 4 s at 10 Hz, is the stricter
+// rule either way).
+TEST_F(Sessions, AClockThatStepsBackKeepsEverythingBeforeTheStepEligible) {
+  const auto steady = [](int i) { return 1000.0 + 0.1 * i; };
+  const auto restarted = [](int i) { return i < 150 ? 1000.0 + 0.1 * i : 0.1 * (i - 150); };
+  const auto nothing = [](LoopDetector&) {};
+  std::vector<DetectionResult> results;
+  const LoopsWithin went_on = loopsWithinTheRunningSession(steady, nothing);
+  const LoopsWithin stepped_back = loopsWithinTheRunningSession(restarted, nothing, &results);
+  size_t into_before_the_step = 0;
+  for (const auto& [query, candidate] : stepped_back) into_before_the_step += query >= 150 && candidate < 150 ? 1 : 0;
+  std::cout << "candidates: steady clock " << went_on.size() << ", stepped back " << stepped_back.size() << " ("
+            << into_before_the_step << " from after the step into before it)\n";
+  EXPECT_GT(into_before_the_step, 50u);
+  EXPECT_EQ(stepped_back, went_on);
+  for (size_t i = 0; i < results.size(); ++i) EXPECT_EQ(results[i].stats.clock_stepped_back, i == 150) << i;
 }
 
 TEST_F(Sessions, AMergeThatSharesAnIdIsRefusedAndChangesNothing) {

@@ -377,12 +377,19 @@ TEST(Persistence, AutosaveBoundsWhatSigkillLoses) {
 }
 
 // A corrupt map at start-up: the node says why (naming the file), refuses keyframes rather than
-// learning a new map on nothing, and does not write over the file when it stops.
+// learning a new map on nothing, and does not write over the file when it stops. Issue 49 item 1:
+// nor after the user loads another map by hand (an empty one here): keyframes are taken again, but
+// neither the periodic save (every second here) nor the save on shutdown writes over the map that
+// was refused, and a save_database without a path is refused; only one naming it would write it.
 TEST(Persistence, AMapThatFailsToLoadAtStartUpIsNeverOverwritten) {
   fs::create_directories(scratch());
   const std::string corrupt = (scratch() / "corrupt_start.mild").string();
   const std::string text = "definitely not a database";
   std::ofstream(corrupt) << text;
+  {
+    mild::LoopDetector empty;
+    mild::saveMap(empty.map(), (scratch() / "empty_by_hand.mild").string());
+  }
   const std::string log = (scratch() / "broken_map.log").string();
   const pid_t pid = fork();
   if (pid == 0) {
@@ -391,7 +398,8 @@ TEST(Persistence, AMapThatFailsToLoadAtStartUpIsNeverOverwritten) {
     dup2(fd, 1);
     dup2(fd, 2);
     execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/broken_map", "__name:=mild_lcd", path_arg.c_str(),
-          "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+          "_load_on_start:=true", "_save_on_shutdown:=true", "_autosave_period:=1", "_use_image_input:=false",
+          static_cast<char*>(nullptr));
     _exit(127);
   }
   ASSERT_GT(pid, 0);
@@ -408,8 +416,23 @@ TEST(Persistence, AMapThatFailsToLoadAtStartUpIsNeverOverwritten) {
     ros::WallDuration(2.0).sleep();
     EXPECT_EQ(outputs.size(), 0u) << "keyframes are refused while the start-up map is not loaded";
     mild_lcd::SaveDatabase::Request save;
-    const auto saved = call<mild_lcd::SaveDatabase>("/broken_map/save_database", save);
-    EXPECT_FALSE(saved.response.success) << "nor saved through the service";
+    EXPECT_FALSE(call<mild_lcd::SaveDatabase>("/broken_map/save_database", save).response.success)
+        << "nor saved through the service";
+
+    mild_lcd::LoadDatabase::Request load;
+    load.path = "empty_by_hand.mild";
+    const auto loaded = call<mild_lcd::LoadDatabase>("/broken_map/load_database", load);
+    ASSERT_TRUE(loaded.response.success) << loaded.response.message;
+    for (int i = 0; i < 3; ++i) {
+      kf.header.stamp = ros::Time(10.0 + i);
+      keyframes.publish(kf);
+    }
+    EXPECT_TRUE(outputs.waitForCount(3, 20.0)) << "keyframes are taken once a map is loaded by hand";
+    ros::WallDuration(3.0).sleep();  // three autosave periods
+    EXPECT_EQ(fs::file_size(corrupt), text.size()) << "the periodic save wrote over the map refused at start-up";
+    const auto refused = call<mild_lcd::SaveDatabase>("/broken_map/save_database", save);
+    EXPECT_FALSE(refused.response.success) << "a save without a path would replace the map refused at start-up";
+    EXPECT_NE(refused.response.message.find("protected"), std::string::npos) << refused.response.message;
   }
   kill(pid, SIGINT);
   int status = 0;

@@ -114,6 +114,12 @@ struct StepStats {
   size_t features = 0;
   size_t eligible_keyframes = 0;
   size_t near_past_keyframes = 0;  // removed from the eligible ones by the near-past band
+  // The keyframe's stamp was below the previous one's of the running session: its clock stepped
+  // back, counted as no time passing (SessionClock).
+  bool clock_stepped_back = false;
+  // Its depths that were given but are not plausible (finite, not 0, outside [kMinDepthMetres,
+  // kMaxDepthMetres]): taken as unknown (features/features.hpp).
+  size_t depths_out_of_range = 0;
   QueryStats query;
 };
 

@@ -16,8 +16,9 @@ enum class PixelFormat { kGray, kBgr, kRgb, kBgra, kRgba };
 
 // Keypoints and their binary descriptors, row i of one describing keypoint i of the other.
 // Optionally the camera's intrinsics, and each keypoint's depth (metres along the optical axis,
-// from a depth camera or the front-end's triangulation; 0 or not finite = unknown), which make the
-// relative pose of a loop metric (PnP) instead of up to scale.
+// from a depth camera or the front-end's triangulation; 0 or not finite = unknown, and so is any
+// depth outside [kMinDepthMetres, kMaxDepthMetres]), which make the relative pose of a loop metric
+// (PnP) instead of up to scale.
 struct Features {
   std::vector<cv::KeyPoint> keypoints;
   DescriptorList descriptors;
@@ -27,6 +28,17 @@ struct Features {
   // against the database's even when there are no descriptors to check.
   int declared_bytes = 0;
 };
+
+// The depths a keypoint may have: 1 cm to 10 km. Closer than any camera focuses, or farther than
+// any depth sensor or triangulation measures, a depth is a unit or scale error (1e30 m gave loops
+// 1e29 m long, 1e-30 m loops of exactly 0 m, both published as metric): it is taken as unknown.
+constexpr float kMinDepthMetres = 0.01f;
+constexpr float kMaxDepthMetres = 1e4f;
+inline bool depthKnown(float depth) { return depth >= kMinDepthMetres && depth <= kMaxDepthMetres; }
+// How many of `depths` were given but are not plausible: finite, not 0 (unknown), and outside the
+// range above (negative included). NaN and infinities, depth cameras' marks of "no return" (REP
+// 117), are unknown without being counted.
+size_t depthsOutOfRange(const std::vector<float>& depths);
 
 // Throws InvalidInput, naming the problem, when the camera is malformed (CameraIntrinsics::wellFormed)
 // or there are depths but not one per keypoint.

@@ -2,6 +2,7 @@
 
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace mild {
@@ -32,21 +33,29 @@ class ConfinedFile {
   void refuseIfNotRegular() const;
   bool exists() const;
   // Replaces the file crash-safely with what `write` writes to the descriptor it is given: the
-  // content goes to a temporary file of its own in the same folder ("<name>.tmp.<8 hex digits>",
-  // created exclusively, never through a link, locked while written), is flushed to disk (fsync),
-  // then renamed over the file, so a crash at any moment leaves either the previous file or the
-  // new one, both complete. Concurrent replacements never share a temporary file: each leaves a
-  // complete file, the last rename wins. Temporary files left by killed replacements are removed
-  // first (an unlocked one older than a minute). Throws InvalidInput when something other than a
-  // regular file sits at the name, IoError when the file cannot be written; whatever `write`
-  // throws is passed on. The previous file is kept on any failure.
-  void replace(const std::function<void(int fd)>& write) const;
+  // content goes to a temporary file of its own in the same folder (".<name>.mild-lcd-save.<16 hex
+  // digits>", created exclusively, never through a link, locked while written), is flushed to disk
+  // (fsync), then renamed over the file, so a crash at any moment leaves either the previous file or
+  // the new one, both complete. Concurrent replacements never share a temporary file: each leaves a
+  // complete file, the last rename wins. `signature` is how every file `write` writes begins (the
+  // format's magic): replace writes it to the temporary file first, and `write` must leave those
+  // bytes as they are (or write the same again). Temporary files left by killed replacements are
+  // removed first, and only they: a name of that pattern, a regular file with one name, owned by
+  // this process's user, beginning with `signature` (or a beginning of it), unlocked and older than
+  // a minute; anything else is never touched. Throws InvalidInput when something other than a
+  // regular file sits at the name, IoError when the file cannot be written; whatever `write` throws
+  // is passed on. The previous file is kept on any failure.
+  void replace(const std::function<void(int fd)>& write, std::string_view signature) const;
 
  private:
   int folder_fd_ = -1;
   std::string name_;
   std::string display_;
 };
+
+// Whether `name` (a file name, no folder) has the pattern of a save's temporary file
+// (ConfinedFile::replace): such names are refused as map names, so that only a save makes them.
+bool isTemporaryFileName(const std::string& name);
 
 // A file named by an ordinary path, for tools and tests that trust their paths: the folder is
 // followed as given (symbolic links included); the file itself is still opened without following
@@ -67,7 +76,9 @@ struct DirectoryLimits {
 //   - relative names ("map.db", "site_a/map.db") are taken from the folder; absolute ones must lie
 //     inside it;
 //   - no "..", no empty or "." components, no symbolic link at any level below the folder;
-//   - at most 4096 bytes, 255 per component, DirectoryLimits::max_depth folders deep;
+//   - at most 4096 bytes, 255 per component (223 for the name of a file saved: its temporary
+//     file's name is 32 bytes longer), DirectoryLimits::max_depth folders deep;
+//   - not the name of a save's temporary file (isTemporaryFileName);
 //   - saving within DirectoryLimits.
 // The folder itself is configured by the operator and may be a symbolic link.
 class DatabaseDirectory {

@@ -44,6 +44,28 @@ struct MapState {
   std::vector<uint8_t> filter_state;        // its saveState()
 };
 
+// The running session's clock, as the temporal exclusion reads it: its keyframes' stamps, except
+// that a stamp below the previous keyframe's (a replay restarted, sim time reset, a clock set back)
+// counts as no time passing since that keyframe. Its times never decrease, so the exclusion is a
+// prefix of the session, and keyframes before a step back become eligible as time goes on after it,
+// instead of staying "in the future" of every later stamp. Stamps that never decrease are their own
+// times, exactly. Earlier sessions are never on it: their stamps come from another run's clock.
+class SessionClock {
+ public:
+  // The time of a keyframe stamped `stamp`, if it were added next.
+  double next(double stamp) const;
+  // Whether `stamp` is below the previous keyframe's: the clock stepped back.
+  bool stepsBack(double stamp) const { return !times_.empty() && stamp < last_stamp_; }
+  void add(double stamp);
+  // One time per keyframe of the running session, in its order.
+  const std::vector<double>& times() const { return times_; }
+
+ private:
+  std::vector<double> times_;
+  double stepped_back_ = 0.0;  // what the stamps stepped back in all, added to each later stamp
+  double last_stamp_ = 0.0;
+};
+
 // What a map holds, ready: a map's own contents, and a checked state (prepareRestore,
 // prepareMerge) waiting to replace them.
 struct MapContents {
@@ -54,6 +76,7 @@ struct MapContents {
   uint64_t next_id = 0;
   KeyframeIndex session_start = 0;
   uint32_t session = 0;  // the session new keyframes join
+  SessionClock clock;    // of keyframes [session_start, records.size())
 };
 
 // Largest keyframe id: ids are below 2^64 - 1 so that "largest + 1", the next free id, exists.
@@ -89,8 +112,10 @@ class KeyframeMap {
 
   // The keyframes [0, eligibleCount) a keyframe stamped `stamp`, about to be stored, may find as
   // candidates: those at least exclusion_frames keyframes (and, when exclusion_seconds > 0, that
-  // many seconds) older; earlier sessions always.
+  // many seconds on the running session's clock) older; earlier sessions always, whatever their
+  // stamps.
   KeyframeIndex eligibleCount(double stamp, int exclusion_frames, double exclusion_seconds) const;
+  const SessionClock& sessionClock() const { return contents_.clock; }
 
   // --- Growing -----------------------------------------------------------------------------------
   // Throws InvalidInput for an id in use or above kMaxKeyframeId; CapacityError when no id is given

@@ -31,10 +31,16 @@ RelativePose relativePoseFromEssential(const cv::Mat& essential, const std::vect
                                        const std::vector<cv::Point2f>& candidate_points, const cv::Matx33d& camera,
                                        int min_inliers);
 
+// The longest metric translation published: the farthest depth a keypoint may have
+// (features/features.hpp).
+constexpr double kMaxMetricTranslationMetres = 1e4;
+
 // Metric pose from the query's keypoints with depth (back-projected with query_camera into the
 // query's frame) and their matches in the candidate's image: PnP in a RANSAC loop (reprojection
-// threshold in pixels), refined on its inliers. depths[i] belongs to query_points[i]; points with
-// a depth <= 0 or not finite are left out. Invalid when fewer than min_inliers remain.
+// threshold in pixels), refined on its inliers. depths[i] belongs to query_points[i]; points whose
+// depth is unknown (depthKnown false: 0, not finite, outside [kMinDepthMetres, kMaxDepthMetres])
+// are left out. Invalid when fewer than min_inliers remain, or when the translation is not finite
+// or longer than kMaxMetricTranslationMetres.
 RelativePose relativePoseFromDepth(const std::vector<cv::Point2f>& query_points, const std::vector<float>& depths,
                                    const std::vector<cv::Point2f>& candidate_points, const cv::Matx33d& query_camera,
                                    const cv::Matx33d& candidate_camera, double threshold_px, int min_inliers);

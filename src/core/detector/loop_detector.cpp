@@ -188,6 +188,8 @@ DetectionResult LoopDetector::process(Observation observation, const std::vector
   result.query_robot = robot;
   result.stats.extract_ms = observation.extract_ms;
   result.stats.features = features.descriptors.size();
+  result.stats.depths_out_of_range = depthsOutOfRange(features.depths);
+  result.stats.clock_stepped_back = map_.sessionClock().stepsBack(stamp);
   const size_t max_candidates = static_cast<size_t>(params_.candidates.max_candidates);
 
   // This map, then the others: each the same step, each through its own filter.

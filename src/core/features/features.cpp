@@ -87,6 +87,11 @@ Features detectAndDescribe(cv::Feature2D& detector, const cv::Mat& gray, size_t 
   return out;
 }
 
+size_t depthsOutOfRange(const std::vector<float>& depths) {
+  return static_cast<size_t>(std::count_if(depths.begin(), depths.end(),
+                                           [](float z) { return std::isfinite(z) && z != 0.0f && !depthKnown(z); }));
+}
+
 void checkCameraAndDepths(const Features& features) {
   if (!features.depths.empty() && features.depths.size() != features.keypoints.size()) {
     throw InvalidInput("keyframe has " + std::to_string(features.depths.size()) + " depths for " +

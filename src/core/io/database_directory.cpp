@@ -6,12 +6,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include "mild_lcd/common/errors.hpp"
@@ -26,8 +29,14 @@ constexpr size_t kMaxComponentBytes = 255;
 
 std::string errnoText(int error) { return std::strerror(error); }
 
-// Temporary files of saves to `target`: "<target>.tmp.<8 hex digits>".
-std::string temporaryPrefix(const std::string& target) { return target + ".tmp."; }
+// Temporary files of saves to `target`: ".<target>.mild-lcd-save.<16 hex digits>": hidden, tagged
+// with the node's name and 64 random bits, a name no user chooses and one a save refuses as a map's
+// (DatabaseDirectory::resolve), so that only a save makes one.
+constexpr char kTemporaryTag[] = ".mild-lcd-save.";
+constexpr size_t kTemporaryTagBytes = sizeof(kTemporaryTag) - 1;
+constexpr size_t kTemporaryDigits = 16;
+constexpr size_t kMaxTemporaryExtraBytes = 1 + kTemporaryTagBytes + kTemporaryDigits;  // what a temporary adds
+std::string temporaryPrefix(const std::string& target) { return "." + target + kTemporaryTag; }
 
 std::string randomSuffix() {
   static std::atomic<uint64_t> counter{0};
@@ -38,13 +47,31 @@ std::string randomSuffix() {
   x ^= x >> 33;
   char text[17];
   std::snprintf(text, sizeof(text), "%016llx", static_cast<unsigned long long>(x));
-  return std::string(text, 8);
+  return std::string(text, kTemporaryDigits);
 }
 
-// Removes temporary files that killed saves left behind. A save in progress holds an exclusive lock
-// on its file, so a file whose lock can be taken is abandoned; the age test covers the instant
-// between a save creating its file and locking it.
-void removeStaleTemporaries(const ConfinedFile& file) {
+// Whether the file starts with `signature`, or with its beginning when shorter (a save killed
+// before it wrote more: an empty file included).
+bool startsWithSignature(int fd, off_t size, std::string_view signature) {
+  const size_t wanted = std::min(signature.size(), static_cast<size_t>(size));
+  std::string head(wanted, '\0');
+  size_t done = 0;
+  while (done < wanted) {
+    const ssize_t n = ::pread(fd, head.data() + done, wanted - done, static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return false;
+    done += static_cast<size_t>(n);
+  }
+  return head == signature.substr(0, wanted);
+}
+
+// Removes temporary files that killed saves left behind, and nothing else. A file is one only when
+// every test holds: its name is a temporary's of this target (temporaryPrefix + 16 hex digits); it
+// is a regular file with one name, owned by this process's user; it starts with `signature` (the
+// format's magic, which replace writes first) or is a beginning of it; it is over a minute old
+// (covering the instant between a save creating its file and locking it); and its lock can be
+// taken (a save in progress holds it). It is unlinked while that lock is held.
+void removeStaleTemporaries(const ConfinedFile& file, std::string_view signature) {
   const int dup_fd = ::dup(file.folder());
   if (dup_fd < 0) return;
   DIR* dir = ::fdopendir(dup_fd);
@@ -54,22 +81,30 @@ void removeStaleTemporaries(const ConfinedFile& file) {
   }
   const std::string prefix = temporaryPrefix(file.name());
   const auto now = std::chrono::system_clock::now();
-  std::vector<std::string> stale;
+  std::vector<std::pair<std::string, int>> stale;  // name, its locked descriptor
   while (const dirent* entry = ::readdir(dir)) {
     const std::string name = entry->d_name;
-    if (name.size() != prefix.size() + 8 || name.compare(0, prefix.size(), prefix) != 0) continue;
+    if (name.size() != prefix.size() + kTemporaryDigits || name.compare(0, prefix.size(), prefix) != 0 ||
+        !isTemporaryFileName(name)) {
+      continue;
+    }
     const int fd = ::openat(file.folder(), name.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
     if (fd < 0) continue;  // a link or a vanished file: not ours to remove
     struct stat st {};
-    const bool regular = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode);
-    const auto modified = std::chrono::system_clock::from_time_t(st.st_mtime);
-    if (regular && now - modified > std::chrono::seconds(60) && ::flock(fd, LOCK_EX | LOCK_NB) == 0) {
-      stale.push_back(name);
+    const bool ours = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_nlink == 1 && st.st_uid == ::geteuid() &&
+                      now - std::chrono::system_clock::from_time_t(st.st_mtime) > std::chrono::seconds(60) &&
+                      startsWithSignature(fd, st.st_size, signature) && ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+    if (ours) {
+      stale.emplace_back(name, fd);
+    } else {
+      ::close(fd);
     }
-    ::close(fd);
   }
   ::closedir(dir);
-  for (const std::string& name : stale) ::unlinkat(file.folder(), name.c_str(), 0);
+  for (const auto& [name, fd] : stale) {
+    ::unlinkat(file.folder(), name.c_str(), 0);
+    ::close(fd);
+  }
 }
 
 // A new temporary file beside the target, created exclusively (never an existing file or a link)
@@ -119,6 +154,14 @@ std::vector<std::string> components(const std::string& relative, const std::stri
 
 }  // namespace
 
+bool isTemporaryFileName(const std::string& name) {
+  const size_t tail = kTemporaryTagBytes + kTemporaryDigits;
+  if (name.size() < tail + 2 || name.front() != '.') return false;
+  if (name.compare(name.size() - tail, kTemporaryTagBytes, kTemporaryTag) != 0) return false;
+  return std::all_of(name.end() - static_cast<long>(kTemporaryDigits), name.end(),
+                     [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+}
+
 ConfinedFile::ConfinedFile(int folder_fd, std::string name, std::string display)
     : folder_fd_(folder_fd), name_(std::move(name)), display_(std::move(display)) {}
 
@@ -155,12 +198,20 @@ void ConfinedFile::refuseIfNotRegular() const {
   }
 }
 
-void ConfinedFile::replace(const std::function<void(int fd)>& write) const {
+void ConfinedFile::replace(const std::function<void(int fd)>& write, std::string_view signature) const {
   refuseIfNotRegular();
-  removeStaleTemporaries(*this);
+  removeStaleTemporaries(*this, signature);
   std::string tmp;
   const int fd = createTemporary(*this, tmp);
   try {
+    // The mark of a save's own temporary file (removeStaleTemporaries checks it), from the start.
+    size_t done = 0;
+    while (done < signature.size()) {
+      const ssize_t n = ::pwrite(fd, signature.data() + done, signature.size() - done, static_cast<off_t>(done));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) throw IoError(display_ + ": cannot write a temporary file beside it (" + errnoText(errno) + ")");
+      done += static_cast<size_t>(n);
+    }
     write(fd);
     if (::fsync(fd) != 0) throw IoError(display_ + ": cannot flush to disk (" + errnoText(errno) + ")");
   } catch (...) {
@@ -250,6 +301,14 @@ ConfinedFile DatabaseDirectory::resolve(const std::string& requested, bool creat
   if (parts.size() - 1 > limits_.max_depth) {
     throw InvalidInput("database name '" + requested + "' is " + std::to_string(parts.size() - 1) +
                        " folders deep; at most " + std::to_string(limits_.max_depth) + " are allowed");
+  }
+  if (isTemporaryFileName(parts.back())) {
+    throw InvalidInput("database name '" + requested + "' is reserved: saves name their temporary files so");
+  }
+  if (create_folders && parts.back().size() > kMaxComponentBytes - kMaxTemporaryExtraBytes) {
+    throw InvalidInput("database name '" + requested + "' ends in a name longer than " +
+                       std::to_string(kMaxComponentBytes - kMaxTemporaryExtraBytes) +
+                       " bytes: a save needs room for its temporary file's name beside it");
   }
   if (create_folders) checkRoomFor(parts, requested);
 

@@ -12,6 +12,7 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <string_view>
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/filter/filter_state.hpp"
@@ -193,23 +194,24 @@ void saveMap(const KeyframeMap& map, const std::string& path) { saveMap(map, fil
 
 void saveMap(const KeyframeMap& map, const ConfinedFile& file) {
   // Written in full under a temporary name, then renamed over the file (ConfinedFile::replace): a
-  // crash at any moment leaves the previous file or the new one, both complete.
-  file.replace([&](int fd) {
-    std::vector<uint8_t> header(kHeaderBytes, 0);
-    writeAll(fd, header, 0, file.display());
+  // crash at any moment leaves the previous file or the new one, both complete. The magic is the
+  // signature replace writes first: what marks a killed save's temporary file as one.
+  const auto write = [&](int fd) {
+    // The rest of the header is written once the payload's size and checksum are known.
+    writeAll(fd, std::vector<uint8_t>(kHeaderBytes - sizeof(kMagic), 0), sizeof(kMagic), file.display());
     if (::lseek(fd, static_cast<off_t>(kHeaderBytes), SEEK_SET) < 0) throw IoError(file.display() + ": cannot seek");
     PayloadWriter writer(fd, file.display());
     writePayload(map, writer);
 
-    header.clear();
-    header.insert(header.end(), kMagic, kMagic + sizeof(kMagic));
+    std::vector<uint8_t> header(kMagic, kMagic + sizeof(kMagic));
     putRaw(header, kDatabaseFormatVersion);
     putRaw(header, uint32_t{0});
     putRaw(header, writer.size());
     putRaw(header, writer.checksum());
     putRaw(header, crc(static_cast<uint32_t>(crc32(0, nullptr, 0)), header.data(), header.size()));
     writeAll(fd, header, 0, file.display());
-  });
+  };
+  file.replace(write, std::string_view(kMagic, sizeof(kMagic)));
 }
 
 namespace {

@@ -18,11 +18,24 @@ uint32_t largestSession(const std::vector<KeyframeRecord>& records) {
 
 }  // namespace
 
+double SessionClock::next(double stamp) const {
+  if (times_.empty()) return stamp;
+  const double stepped_back = stepped_back_ + (stamp < last_stamp_ ? last_stamp_ - stamp : 0.0);
+  return std::max(times_.back(), stamp + stepped_back);  // never below the last (rounding)
+}
+
+void SessionClock::add(double stamp) {
+  const double time = next(stamp);
+  if (stepsBack(stamp)) stepped_back_ += last_stamp_ - stamp;
+  times_.push_back(time);
+  last_stamp_ = stamp;
+}
+
 KeyframeMap::KeyframeMap(const DatabaseParams& database, const FilterParams& filter, std::string descriptor_name)
     : database_params_(database),
       filter_params_(filter),
       descriptor_name_(std::move(descriptor_name)),
-      contents_{KeyframeDatabase(database), makeTemporalFilter(filter), {}, {}, 0, 0, 0} {}
+      contents_{KeyframeDatabase(database), makeTemporalFilter(filter), {}, {}, 0, 0, 0, SessionClock()} {}
 
 std::optional<KeyframeIndex> KeyframeMap::find(uint64_t id) const {
   auto it = contents_.index_of_id.find(id);
@@ -35,7 +48,8 @@ Features KeyframeMap::features(KeyframeIndex k) const {
 }
 
 size_t KeyframeMap::memoryBytes() const {
-  size_t bytes = contents_.database.memoryBytes() + contents_.records.capacity() * sizeof(KeyframeRecord);
+  size_t bytes = contents_.database.memoryBytes() + contents_.records.capacity() * sizeof(KeyframeRecord) +
+                 contents_.clock.times().capacity() * sizeof(double);
   for (const auto& r : contents_.records) bytes += r.keypoints.capacity() * sizeof(cv::KeyPoint);
   return bytes + contents_.index_of_id.size() * (sizeof(uint64_t) + sizeof(KeyframeIndex) + 2 * sizeof(void*));
 }
@@ -47,13 +61,14 @@ KeyframeIndex KeyframeMap::eligibleCount(double stamp, int exclusion_frames, dou
   size_t limit = frames == 0 ? n : (n + 1 > frames ? n + 1 - frames : 0);
   if (limit <= contents_.session_start) return contents_.session_start;  // earlier sessions are never "a moment ago"
   if (exclusion_seconds > 0.0) {
-    // Keyframes are stored in arrival order; stamps are expected to grow, so the eligible set is a prefix.
-    const double newest_allowed = stamp - exclusion_seconds;
-    const auto end = contents_.records.begin() + static_cast<long>(limit);
-    limit = static_cast<size_t>(std::upper_bound(contents_.records.begin(), end, newest_allowed,
-                                                 [](double s, const KeyframeRecord& r) { return s < r.stamp; }) -
-                                contents_.records.begin());
-    limit = std::max<size_t>(limit, contents_.session_start);
+    // Within the running session only, on its clock, whose times never decrease: the eligible
+    // keyframes are a prefix of it. (Another session's stamps come from another run's clock: one
+    // stamped later than this run hid every keyframe of it.)
+    const std::vector<double>& times = contents_.clock.times();
+    const double newest_allowed = contents_.clock.next(stamp) - exclusion_seconds;
+    const auto end = times.begin() + static_cast<long>(limit - contents_.session_start);
+    limit = contents_.session_start +
+            static_cast<size_t>(std::upper_bound(times.begin(), end, newest_allowed) - times.begin());
   }
   return static_cast<KeyframeIndex>(limit);
 }
@@ -77,6 +92,7 @@ KeyframeIndex KeyframeMap::add(uint64_t id, double stamp, std::vector<cv::KeyPoi
   contents_.records.push_back(KeyframeRecord{id, stamp, contents_.session, std::move(keypoints), camera});
   contents_.index_of_id.emplace(id, index);
   contents_.next_id = std::max(contents_.next_id, id + 1);
+  contents_.clock.add(stamp);
   return index;
 }
 
@@ -88,6 +104,7 @@ void KeyframeMap::reset() {
   contents_.next_id = 0;
   contents_.session_start = 0;
   contents_.session = 0;
+  contents_.clock = SessionClock();
 }
 
 void KeyframeMap::restore(MapState state, bool continue_session) {
@@ -195,13 +212,12 @@ MapContents KeyframeMap::build(MapState state, KeyframeIndex session_start, uint
     filter->loadState(state.filter_state);
     if (filter->stateKeyframes() > n) throw InvalidInput("filter state covers more keyframes than the database holds");
   }
-  return MapContents{std::move(database),
-                     std::move(filter),
-                     std::move(state.records),
-                     std::move(index_of_id),
-                     state.next_id,
-                     session_start,
-                     session};
+  // The running session's clock, as adding its keyframes one by one built it.
+  SessionClock clock;
+  for (size_t k = session_start; k < n; ++k) clock.add(state.records[k].stamp);
+  return MapContents{
+      std::move(database), std::move(filter), std::move(state.records), std::move(index_of_id), state.next_id,
+      session_start,       session,           std::move(clock)};
 }
 
 void KeyframeMap::commitRestore(MapContents&& prepared) { contents_ = std::move(prepared); }

@@ -5,6 +5,8 @@
 
 #include <opencv2/calib3d.hpp>
 
+#include "mild_lcd/features/features.hpp"
+
 namespace mild {
 
 RelativePose relativePoseFromEssential(const cv::Mat& essential, const std::vector<cv::Point2f>& query_points,
@@ -47,8 +49,8 @@ RelativePose relativePoseFromDepth(const std::vector<cv::Point2f>& query_points,
   std::vector<cv::Point2d> image;
   const cv::Matx33d back_project = query_camera.inv();
   for (size_t i = 0; i < depths.size(); ++i) {
+    if (!depthKnown(depths[i])) continue;  // unknown, or outside the plausible range
     const double z = depths[i];
-    if (!(z > 0.0) || !std::isfinite(z)) continue;
     const cv::Vec3d ray = back_project * cv::Vec3d(query_points[i].x, query_points[i].y, 1.0);
     object.emplace_back(ray[0] * z / ray[2], ray[1] * z / ray[2], z);
     image.emplace_back(candidate_points[i].x, candidate_points[i].y);
@@ -85,8 +87,12 @@ RelativePose relativePoseFromDepth(const std::vector<cv::Point2f>& query_points,
   const cv::Matx33d r_cq(r);
   const cv::Vec3d t_cq(tvec);
   if (!std::isfinite(t_cq[0]) || !std::isfinite(t_cq[1]) || !std::isfinite(t_cq[2])) return pose;
+  const cv::Vec3d centre = -(r_cq.t() * t_cq);
+  // Two cameras that see the same points this far apart are a scale error, not a loop: no metric
+  // pose (the essential matrix's direction is used instead).
+  if (!(cv::norm(centre) <= kMaxMetricTranslationMetres)) return pose;
   pose.rotation = r_cq.t();
-  pose.translation = -(r_cq.t() * t_cq);
+  pose.translation = centre;
   pose.inliers = static_cast<int>(inliers.size());
   pose.metric = true;
   pose.valid = true;

@@ -56,7 +56,7 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
     shared.team->mapChanged(robot_);  // the file holds it: no change to save
     return message;
   } catch (const std::exception& e) {
-    saves_allowed_ = false;
+    database_protected_ = true;
     const auto lock = shared.lock();
     failure(shared) = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
                       "); the file is left untouched and nothing will be saved over it";
@@ -64,17 +64,30 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
   }
 }
 
+std::string DatabaseStore::protectionNotice() const {
+  return "the map " + database_display_ +
+         " failed to load at start-up and is protected: nothing is saved over it unless a save_database request "
+         "names it (path: " +
+         database_display_ + ")";
+}
+
 std::string DatabaseStore::save(SharedDetector& shared, const std::string& requested) {
   const mild::ConfinedFile file = resolve(requested, true);
+  const bool to_database_path = !database_display_.empty() && file.display() == database_display_;
   const auto lock = shared.lock();
   if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
+  // A request that names the file is the user's decision; an empty one merely defaults to it.
+  if (to_database_path && database_protected_ && requested.empty()) throw mild::InvalidInput(protectionNotice());
   mild::saveMap(detector(shared).map(), file);
-  if (file.display() == database_display_) saved_changes_ = shared.changes;
+  if (to_database_path) {
+    saved_changes_ = shared.changes;
+    database_protected_ = false;
+  }
   return "saved " + std::to_string(detector(shared).map().size()) + " keyframes to " + file.display();
 }
 
 std::string DatabaseStore::autosave(SharedDetector& shared) {
-  if (!save_on_shutdown_ || !saves_allowed_) return "";
+  if (!save_on_shutdown_ || database_protected_) return "";
   {
     const auto lock = shared.lock();
     if (saved_changes_ == shared.changes) return "";
@@ -91,9 +104,14 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
   mild::commitLoad(detector(shared).map(), std::move(prepared));
   shared.team->mapChanged(robot_);
   ++shared.changes;
-  // A map loaded by hand is the user's decision: the start-up failure no longer stands in the way.
+  // A map loaded by hand is the user's decision: keyframes are taken again. ~database_path stays
+  // protected (what was loaded is not what it holds), unless this was that very file.
   failure(shared).clear();
-  saves_allowed_ = true;
+  if (!database_display_.empty() && file.display() == database_display_) {
+    database_protected_ = false;
+    saved_changes_ = shared.changes;  // the running map is what the file holds
+  }
+  if (database_protected_) report.message += "; " + protectionNotice();
   return report;
 }
 
@@ -113,7 +131,7 @@ mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string&
 
 std::string DatabaseStore::saveOnShutdown(SharedDetector& shared) {
   if (!save_on_shutdown_) return "";
-  if (!saves_allowed_) return "not saving on shutdown: the map failed to load at start-up and is left as it was";
+  if (database_protected_) return "not saving on shutdown: " + protectionNotice();
   return save(shared, "");
 }
 

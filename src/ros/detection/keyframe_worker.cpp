@@ -2,6 +2,8 @@
 
 #include <malloc.h>
 
+#include <sstream>
+
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 
@@ -236,6 +238,20 @@ void KeyframeWorker::process(Staged staged) {
     total_query_ms_ += s.query_ms;
     stats_.mean_ms = total_ms_ / static_cast<double>(stats_.processed);
     stats_.mean_query_ms = total_query_ms_ / static_cast<double>(stats_.processed);
+    stats_.depths_out_of_range += s.depths_out_of_range;
+    stats_.clock_steps_back += s.clock_stepped_back ? 1 : 0;
+  }
+  if (out.result.stats.clock_stepped_back && hooks_.warn) {
+    hooks_.warn("keyframe (stamp " + std::to_string(out.header.stamp.toSec()) +
+                ") is stamped before the previous one: the clock stepped back (a replay restarted?); counted as no "
+                "time passing for detector/exclusion_seconds");
+  }
+  if (out.result.stats.depths_out_of_range > 0 && hooks_.warn) {
+    std::ostringstream what;
+    what << "keyframe (stamp " << out.header.stamp.toSec() << "): " << out.result.stats.depths_out_of_range
+         << " depths outside [" << mild::kMinDepthMetres << ", " << mild::kMaxDepthMetres
+         << "] m taken as unknown (a unit or scale error upstream?)";
+    hooks_.warn(what.str());
   }
   // Publishing and drawing happen outside the detector lock; their failures are theirs, not the
   // keyframe's: it is stored and answered already.

@@ -1,6 +1,8 @@
 #include "mild_lcd/ros/messages/message_conversions.hpp"
 
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <string>
 
 #include <Eigen/Geometry>
@@ -33,11 +35,18 @@ std::vector<mild_lcd::KeyPoint> keypointsToMsg(const std::vector<cv::KeyPoint>& 
 }
 
 ros::Time stampOf(double seconds) {
-  // ros::Time holds unsigned 32-bit seconds; a stamp outside (a keyframe given time 0, or a file
-  // from elsewhere) is clamped rather than thrown at the publisher.
+  // ros::Time holds unsigned 32-bit seconds and nanoseconds; a stamp outside (a keyframe given time
+  // 0, or a file from elsewhere) is clamped to its range rather than thrown at the publisher. Split
+  // here, not by ros::Time(double), which throws when the nanoseconds round up past its last second.
+  constexpr uint32_t kLatestSecond = std::numeric_limits<uint32_t>::max();
+  const ros::Time latest(kLatestSecond, 999999999u);
   if (!(seconds > 0.0)) return ros::Time(0, 0);
-  if (seconds >= 4294967295.0) return ros::Time(4294967295u, 0);
-  return ros::Time(seconds);
+  if (!(seconds < 4294967296.0)) return latest;
+  double whole = 0.0;
+  const double fraction = std::modf(seconds, &whole);
+  const auto nanoseconds = static_cast<uint64_t>(std::llround(fraction * 1e9));
+  if (nanoseconds < 1000000000u) return ros::Time(static_cast<uint32_t>(whole), static_cast<uint32_t>(nanoseconds));
+  return whole >= kLatestSecond ? latest : ros::Time(static_cast<uint32_t>(whole) + 1, 0);
 }
 
 int descriptorBytesOf(uint32_t field) {

@@ -182,9 +182,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
           NODELET_INFO("%s%s", robot->name.empty() ? "" : (robot->name + ": ").c_str(), message.c_str());
       } catch (const std::exception& e) {
         NODELET_FATAL(
-            "cannot load the map %s at start-up: %s. The file is left as it is; that robot's keyframes are refused and "
-            "nothing is saved until a map is loaded with load_database (or the node restarts)",
-            robot->store->databasePath().c_str(), e.what());
+            "cannot load the map %s at start-up: %s. The file is left as it is; that robot's keyframes are refused "
+            "until a map is loaded with load_database. The file stays protected whatever is loaded meanwhile: no "
+            "autosave, no save on shutdown, no save_database without a path writes over it; a save_database request "
+            "naming it does (path: %s), as does loading it by hand",
+            robot->store->databasePath().c_str(), e.what(), robot->store->databasePath().c_str());
         failed = true;
       }
     }
@@ -248,7 +250,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       for (const auto& robot : robots_) {
         try {
           const std::string message = robot->store->saveOnShutdown(shared_);
-          if (!message.empty()) shutdownMessage(getName(), message, !robot->store->savesAllowed());
+          if (!message.empty()) shutdownMessage(getName(), message, robot->store->databaseProtected());
         } catch (const std::exception& e) {
           shutdownMessage(getName(), std::string("could not save the database on shutdown: ") + e.what(), true);
         }

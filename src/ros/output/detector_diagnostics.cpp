@@ -50,6 +50,8 @@ void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& 
   status.add("dropped keyframes", c.dropped);
   status.add("rejected keyframes", c.rejected);
   status.add("discarded keyframes", c.discarded);
+  status.add("depths out of range", c.depths_out_of_range);
+  status.add("clock steps back", c.clock_steps_back);
   status.add("last query (ms)", c.last_query_ms);
   status.add("mean query (ms)", c.mean_query_ms);
   status.add("last keyframe (ms)", c.last_ms);

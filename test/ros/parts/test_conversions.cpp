@@ -145,8 +145,12 @@ TEST(Conversions, AnEmptyKeyframeCarriesItsDeclaredWidth) {
 
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {
   EXPECT_EQ(stampOf(-5.0), ros::Time(0, 0));
-  EXPECT_EQ(stampOf(1e12), ros::Time(4294967295u, 0));
+  EXPECT_EQ(stampOf(1e12), ros::Time(4294967295u, 999999999u)) << "the latest ros::Time";
   EXPECT_EQ(stampOf(12.5), ros::Time(12.5));
+  // Issue 49 item 5: the last second of ros::Time is inside it, not clamped to its start.
+  EXPECT_EQ(stampOf(4294967295.5), ros::Time(4294967295u, 500000000u));
+  EXPECT_EQ(stampOf(4294967294.75), ros::Time(4294967294u, 750000000u));
+  EXPECT_EQ(stampOf(std::nextafter(4294967296.0, 0.0)).sec, 4294967295u) << "rounding never wraps the seconds";
 }
 
 TEST(Conversions, AStepThatSplitsASampleIsRefusedNotThrownByOpenCv) {

@@ -61,6 +61,68 @@ TEST_F(Store, AnyStartUpLoadFailureLeavesTheMapAndDisablesSaving) {
   EXPECT_EQ(mild::readMapFile((dir_ / "map.db").string()).records.size(), 120u);
 }
 
+// Issue 49 item 1: the user loads another map by hand (an empty one, a one-keyframe backup) after the
+// start-up load was refused. Keyframes are taken again, but neither autosave nor save_on_shutdown
+// nor a save_database without a path writes over the map that was refused; a save_database that
+// names it does (the user's explicit decision), and so does loading that very file by hand.
+TEST_F(Store, AMapRefusedAtStartUpStaysProtectedWhateverIsLoadedInBetween) {
+  SharedDetector original;
+  original.setTeam(std::make_unique<mild::RobotTeam>(detector(120)));
+  mild::saveMap(original.robot(0).map(), (dir_ / "map.db").string());
+  const auto size = fs::file_size(dir_ / "map.db");
+  mild::saveMap(detector(0)->map(), (dir_ / "empty.db").string());
+  mild::saveMap(detector(1)->map(), (dir_ / "backup.db").string());
+
+  DatabaseStore store(
+      settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\nmax_database_mb: 1\n"));
+  SharedDetector running;
+  running.setTeam(std::make_unique<mild::RobotTeam>(detector(0)));
+  EXPECT_THROW(store.loadOnStart(running), mild::Error);
+  const auto untouched = [&](const std::string& when) {
+    EXPECT_EQ(fs::file_size(dir_ / "map.db"), size) << when;
+    EXPECT_EQ(mild::readMapFile((dir_ / "map.db").string()).records.size(), 120u) << when;
+  };
+
+  for (const std::string& by_hand : {std::string("empty.db"), std::string("backup.db")}) {
+    const std::string loaded = store.load(running, by_hand, false).message;
+    EXPECT_NE(loaded.find("is protected"), std::string::npos) << "the reply says so: " << loaded;
+    EXPECT_TRUE(running.failure[0].empty()) << "keyframes are taken again after " << by_hand;
+    ++running.changes;  // as the worker does after each keyframe
+    const std::string autosaved = store.autosave(running);
+    untouched("autosave after loading " + by_hand);
+    const std::string shutdown = store.saveOnShutdown(running);
+    EXPECT_NE(shutdown.find("not saving"), std::string::npos) << shutdown;
+    EXPECT_NE(shutdown.find("map.db"), std::string::npos) << "names the protected map: " << shutdown;
+    untouched("save_on_shutdown after loading " + by_hand);
+    const std::string refused = errorOf([&] { store.save(running, ""); });
+    EXPECT_NE(refused.find("protected"), std::string::npos) << refused;
+    untouched("save_database without a path after loading " + by_hand);
+  }
+  // Saving elsewhere is fine.
+  EXPECT_NE(store.save(running, "today.db").find("saved 1 keyframes"), std::string::npos);
+  untouched("a save elsewhere");
+  // Naming it is the user's decision: saved, and from then on the map is this run's.
+  EXPECT_NE(store.save(running, "map.db").find("saved 1 keyframes"), std::string::npos);
+  EXPECT_EQ(mild::readMapFile((dir_ / "map.db").string()).records.size(), 1u);
+  ++running.changes;
+  EXPECT_NE(store.autosave(running).find("saved"), std::string::npos) << "autosave resumes";
+  EXPECT_NE(store.saveOnShutdown(running).find("saved"), std::string::npos);
+}
+
+// A map that could not be read at start-up (here: corrupt) and is then restored by the user and
+// loaded by hand from ~database_path: the running map holds it, so saves resume.
+TEST_F(Store, LoadingTheRefusedMapItselfByHandLiftsItsProtection) {
+  std::ofstream(dir_ / "map.db") << "not a map";
+  DatabaseStore store(settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\n"));
+  SharedDetector running;
+  running.setTeam(std::make_unique<mild::RobotTeam>(detector(0)));
+  EXPECT_THROW(store.loadOnStart(running), mild::Error);
+  mild::saveMap(detector(4)->map(), (dir_ / "map.db").string());  // the user restores it
+  EXPECT_EQ(store.load(running, "", false).keyframes, 4u);
+  ++running.changes;
+  EXPECT_NE(store.autosave(running).find("saved 4 keyframes"), std::string::npos);
+}
+
 TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
   DatabaseStore store(settings("database_path: new.db\nload_on_start: true\nsave_on_shutdown: true\n"));
   SharedDetector running;

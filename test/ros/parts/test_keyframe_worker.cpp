@@ -32,6 +32,46 @@ TEST(Worker, CountsEveryKeyframeAnsweredRejectedOrDiscarded) {
   EXPECT_EQ(shared.robot(0).map().size(), 2u);
 }
 
+// Issue 49 item 4: depths out of range are unknown, counted and said; the keyframe is answered.
+TEST(Worker, CountsAndSaysDepthsOutOfRange) {
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
+  Answers answers;
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, recordingHooks(answers));
+  worker.start();
+  auto absurd = keyframeMsg(1.0, std::nullopt);
+  absurd->depths = {1e30f, 1e-30f, std::numeric_limits<float>::quiet_NaN()};  // the NaN: unknown, not absurd
+  worker.push(keyframeInput(absurd));
+  auto plausible = keyframeMsg(2.0, std::nullopt);
+  plausible->depths = {0.5f, 0.0f, 20.0f};
+  worker.push(keyframeInput(plausible));
+  worker.waitIdle();
+  const WorkerCounters c = worker.counters();
+  EXPECT_EQ(c.processed, 2u);
+  EXPECT_EQ(c.depths_out_of_range, 2u);
+  std::lock_guard<std::mutex> lock(answers.mutex);
+  ASSERT_EQ(answers.events.size(), 3u);
+  EXPECT_NE(answers.events[0].find("2 depths outside"), std::string::npos) << answers.events[0];
+}
+
+// Issue 49 item 3: a stamp below the previous keyframe's is counted and said; the keyframe answered.
+TEST(Worker, CountsAndSaysAClockThatStepsBack) {
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(std::make_unique<mild::LoopDetector>()));
+  Answers answers;
+  KeyframeWorker worker(shared, 100, 256u << 20, InputLimits{1000 * 1000, 10000}, recordingHooks(answers));
+  worker.start();
+  for (const double stamp : {2000.0, 2001.0, 5.0, 6.0, 6.0})
+    worker.push(keyframeInput(keyframeMsg(stamp, std::nullopt)));
+  worker.waitIdle();
+  const WorkerCounters c = worker.counters();
+  EXPECT_EQ(c.processed, 5u);
+  EXPECT_EQ(c.clock_steps_back, 1u) << "one step back; an equal stamp is none";
+  std::lock_guard<std::mutex> lock(answers.mutex);
+  ASSERT_EQ(answers.events.size(), 6u);
+  EXPECT_NE(answers.events[2].find("stepped back"), std::string::npos) << answers.events[2];
+}
+
 TEST(Worker, StoppingDiscardsWhatWaitsAndCountsIt) {
   for (const bool extraction_thread : {false, true}) {
     SCOPED_TRACE(extraction_thread ? "extraction thread" : "one thread");

@@ -26,32 +26,41 @@ class DatabaseStore {
   const std::string& directory() const { return directory_.root(); }
 
   // ~load_on_start: loads ~database_path as a new session (a missing file starts an empty map).
-  // On any failure the file is left as it is, saving is disabled for the rest of the run (a save
-  // would replace the map with what this run learns from nothing), shared.failure says why, and the
-  // error is rethrown. Returns a line for the log.
+  // On any failure the file is left as it is and protected (databaseProtected), shared.failure says
+  // why (keyframes are refused until a map is loaded by hand), and the error is rethrown. Returns a
+  // line for the log.
   std::string loadOnStart(SharedDetector& shared);
 
   // The services. `requested` empty means ~database_path. Names resolve inside ~database_dir or are
   // refused; loading reads and rebuilds the index without the detector lock, then swaps it in.
-  // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure.
+  // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure. While
+  // ~database_path is protected, a save to it must name it (`requested` not empty): that is the
+  // user's explicit decision to replace it, and lifts the protection.
   std::string save(SharedDetector& shared, const std::string& requested);
   mild::LoadReport load(SharedDetector& shared, const std::string& requested, bool continue_session);
   // Adds a saved map to the running one (KeyframeMap::merge). The file is read without the lock;
   // the merge itself holds it while the index is rebuilt (keyframes wait in the queue meanwhile).
   mild::LoadReport merge(SharedDetector& shared, const std::string& requested);
 
-  // ~save_on_shutdown, unless a start-up load failed. Returns what happened (empty: nothing to do).
+  // ~save_on_shutdown, unless ~database_path is protected. Returns what happened (empty: nothing to
+  // do).
   std::string saveOnShutdown(SharedDetector& shared);
   // ~autosave_period: as saveOnShutdown, but only when the maps changed (SharedDetector::changes)
   // since this store's last save to ~database_path. Returns what happened (empty: nothing to do).
   std::string autosave(SharedDetector& shared);
-  bool savesAllowed() const { return saves_allowed_; }
+  // Whether ~database_path holds a map that failed to load at start-up, which nothing but the user's
+  // explicit word may replace: not autosave, not save_on_shutdown, not a save_database without a
+  // path, whatever map was loaded by hand meanwhile (a map over ~max_database_mb, an unreadable
+  // one: the user may fix the cause and restart). Lifted by a save_database that names the file,
+  // or by loading that very file by hand (the running map then holds it).
+  bool databaseProtected() const { return database_protected_; }
 
  private:
   mild::ConfinedFile resolve(const std::string& requested, bool for_saving) const;
 
   mild::LoopDetector& detector(SharedDetector& shared) const { return shared.robot(robot_); }
   std::string& failure(SharedDetector& shared) const { return shared.failure.at(robot_); }
+  std::string protectionNotice() const;  // why ~database_path is not saved to, and how to
 
   size_t robot_;
   mild::DatabaseDirectory directory_;
@@ -59,7 +68,7 @@ class DatabaseStore {
   bool load_on_start_;
   bool save_on_shutdown_;
   unsigned long long max_bytes_;
-  std::atomic<bool> saves_allowed_{true};
+  std::atomic<bool> database_protected_{false};
   std::string database_display_;  // ~database_path as resolved ("" when not set)
   // SharedDetector::changes when ~database_path last held the map (start: nothing learnt yet, or
   // what the file holds). Under the detector lock.

@@ -53,6 +53,9 @@ struct WorkerCounters {
   size_t queued_bytes = 0, capacity_bytes = 0;
   double last_ms = 0.0, mean_ms = 0.0, last_query_ms = 0.0, mean_query_ms = 0.0;
   size_t keyframes = 0, features = 0, memory_bytes = 0, discarded_buckets = 0;  // database snapshot
+  // Of the answered keyframes: depths taken as unknown for being out of range, and those stamped
+  // below the previous keyframe of their session (StepStats).
+  size_t depths_out_of_range = 0, clock_steps_back = 0;
 };
 
 class KeyframeWorker {
