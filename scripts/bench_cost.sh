@@ -8,6 +8,9 @@
 #   ./scripts/bench_cost.sh                                  # every row, real + public sequences
 #   ROWS="default,verification/method usac" ./scripts/bench_cost.sh
 #   SEQUENCES="name=folder name=folder" ./scripts/bench_cost.sh   # other sequences (names gp_* count as real)
+#   ROWS=frontier ./scripts/bench_cost.sh   # the cost-accuracy frontier of docs/accuracy.md: ORB at 800 / 1,500 /
+#                                           # 3,000 features, BRISK, AKAZE (also 2 octaves, half resolution) on the
+#                                           # real sequences at keyframe steps 1 and 2 and the public ones at step 5
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 
@@ -15,6 +18,18 @@ BENCH="${BENCH:-$REPO/../shared/bench}"
 OUT="${OUT:-$BUILD_DIR/bench_cost}"
 mild_install_deps
 mild_configure_and_build --target mild_offline >/dev/null
+CACHE="${MILD_BENCH_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mild_lcd/bench}"
+step_of() {  # source folder, name, step: the subsampled sequence in the cache, "name_kstep=folder"
+  local dir="$CACHE/steps/${2}_k$3"
+  [[ -f "$dir/gt_loops.txt" ]] || /usr/bin/python3 "$BENCH/subsample.py" "$1" "$3" "$dir" >/dev/null
+  echo "${2}_k$3=$dir"
+}
+if [[ -z "${SEQUENCES:-}" && "${ROWS:-}" == frontier ]]; then
+  mkdir -p "$CACHE/steps"
+  SEQUENCES=""
+  for s in gp_day_a gp_night_a; do for k in 1 2; do SEQUENCES+=" $(step_of "$BENCH/real/$s" $s $k)"; done; done
+  for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do SEQUENCES+=" $(step_of "$BENCH/$s" $s 5)"; done
+fi
 if [[ -z "${SEQUENCES:-}" ]]; then
   SEQUENCES="gp_day_a=$BENCH/real/gp_day_a gp_night_a=$BENCH/real/gp_night_a"
   for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do SEQUENCES+=" $s=$BENCH/$s"; done

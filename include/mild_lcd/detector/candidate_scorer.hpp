@@ -5,9 +5,9 @@
 // saliency among the query's eligible keyframes, and the geometric verification measured against
 // chance (the a-contrario number of false alarms of its model, chance_agreement.hpp) -- combined by
 // a logistic model fitted by plain maximum likelihood (every candidate weighing the same, right or
-// wrong) on sequences with ground truth, rendered and real, at several keyframe steps and with
-// ORB, BRISK and AKAZE (scripts/fit_scoring.py; docs/accuracy.md says on which, and how it was
-// cross-validated). Each input is scale-free: the saliency is a robust z against the query's own
+// wrong) on ORB runs of sequences with ground truth, rendered and real, at several keyframe steps
+// (scripts/fit_scoring.py; docs/accuracy.md says on which, how it was cross-validated, and how it
+// holds for BRISK and AKAZE, which it was not fitted on). Each input is scale-free: the saliency is a robust z against the query's own
 // similarities, the significance divides out the matches, the tolerance and the image area, so
 // that a count of inliers at 200 or 2,000 matches, 160 x 120 or 640 x 480, 256 or 512 bits is
 // read on one scale. The filter's temporal reasoning enters as one term beside the keyframe's own
@@ -49,9 +49,9 @@ struct ScoringParams {
       "capped just below decision_probability, and accepted is exactly probability >= decision_probability. Off "
       "(or verification off) gives the filter's probability as it is.");
     v("weights", p.weights, Bounds::list(kFeatures, kFeatures, Bounds::any()),
-      "Fitted by scripts/fit_scoring.py on the sequences docs/accuracy.md names, real frames included, at "
-      "keyframe steps 1, 2, 5 and 10, with ORB, BRISK and AKAZE (cross-validated leaving out whole kinds, "
-      "whole steps and each descriptor: scripts/bench_calibration.sh).");
+      "Fitted by scripts/fit_scoring.py on ORB runs of the sequences docs/accuracy.md names, real frames "
+      "included, at keyframe steps 1, 2, 5 and 10; cross-validated leaving out whole kinds and whole steps, "
+      "and measured unchanged on BRISK and AKAZE, which it was not fitted on (scripts/bench_calibration.sh).");
     v("bias", p.bias, Bounds::any(), "The model's intercept.");
     v("filter_type", p.filter_type, Bounds::oneOf(temporalFilterTypes()),
       "The filter/type the weights were fitted with. The filter's probability is one of the model's inputs and "
@@ -65,8 +65,9 @@ struct ScoringParams {
     v("min_comparable_keyframes", p.min_comparable_keyframes, Bounds::atLeast(0),
       "While a map has fewer eligible keyframes than this, the similarity's saliency and the filter's "
       "probability have nothing to compare a keyframe with: their terms take the values of no information "
-      "(saliency 1, filter probability 0.5) and the probability rests on the inliers. A loop at the first "
-      "eligible keyframe is then accepted on its geometry. 0 = never.");
+      "(saliency 1, filter probability 0.5) and the probability rests on the geometry's significance: a loop at "
+      "the first eligible keyframe is then the best candidate, more likely than not, and accepted once there "
+      "are keyframes to compare it with. 0 = never.");
   }
   void validate() const { validateDeclared(*this); }
 };
