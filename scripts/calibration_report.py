@@ -11,8 +11,9 @@ Prints Markdown tables:
      (BENCH/score.py), and precision / recall of each query's best candidate at the decision
      probability (scoring/decision_probability, `accepted`);
   2. the scorer refitted (scripts/fit_scoring.py, the default's recipe) without each kind in turn
-     -- real frames, each render kind, each descriptor, each keyframe step -- and scored on what was
-     left out: ECE (the referee's bins), recall@100%P, AP;
+     -- real frames, each render kind, each keyframe step (fitted on ORB runs, as the default) and
+     each descriptor (fitted on the others) -- and scored on what was left out: ECE (the referee's
+     bins), recall@100%P, AP;
 and draws a reliability diagram per kind (real day, real night, each render kind, each descriptor)
 from the published candidates into --plots. With --fit, prints the scorer fitted on every run.
 """
@@ -30,6 +31,7 @@ sys.path.insert(0, HERE)
 import fit_scoring  # noqa: E402
 
 EDGES = (0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)  # the referee's default bins
+FIT_DESCRIPTORS = {"orb"}  # the default scorer was fitted on ORB runs only (candidate_scorer.hpp)
 
 
 def ece_of(scored, edges=EDGES):
@@ -131,21 +133,26 @@ def main():
         if g not in heads:
             continue
         for value in sorted({key(r) for r in runs}, key=str):
-            w, b = fit_scoring.fit([r for r in runs if key(r) != value], fit_scoring.L2)
+            # The default's recipe (fitted on the FIT_DESCRIPTORS' runs) without what is left out; a
+            # descriptor left out is fitted on the others.
+            train = [r for r in runs if key(r) != value and (g == "descriptor" or r["descriptor"] in FIT_DESCRIPTORS)]
+            if not train:
+                continue
+            w, b = fit_scoring.fit(train, fit_scoring.L2)
             for r in (r for r in runs if key(r) == value):
                 m = fit_scoring.metrics(r, w, b)
                 left[r["id"]][g] = (fit_scoring.ece(r, w, b), m["recall_at_100_precision"], m["average_precision"])
     for r in runs:
-        cells = [f"{v[0]:.3f} / {v[1]:.3f} / {v[2]:.3f}" for v in (left[r["id"]][h] for h in heads)]
+        cells = [f"{v[0]:.3f} / {v[1]:.3f} / {v[2]:.3f}" if v else "–" for v in (left[r["id"]].get(h) for h in heads)]
         print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | " + " | ".join(cells) + " |")
-    worst = {h: max(left[r["id"]][h][0] for r in runs) for h in heads}
+    worst = {h: max(left[r["id"]][h][0] for r in runs if h in left[r["id"]]) for h in heads}
     print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" for h, v in worst.items()))
 
     if a.plots:
         plot(a.plots, runs)
     if a.fit:
-        w, b = fit_scoring.fit(runs, fit_scoring.L2)
-        print("\nscoring (fitted on every run above):")
+        w, b = fit_scoring.fit([r for r in runs if r["descriptor"] in FIT_DESCRIPTORS], fit_scoring.L2)
+        print(f"\nscoring (fitted on every {', '.join(sorted(FIT_DESCRIPTORS))} run above):")
         print(f"  # features: {', '.join(runs[0]['features'])}")
         print(f"  weights: [{', '.join(f'{v:.3f}' for v in w)}]")
         print(f"  bias: {b:.3f}")
@@ -175,8 +182,12 @@ def plot(folder, runs):
         panels.setdefault(("descriptor", r["descriptor"]), []).extend(scored)
     for group in ("kind", "descriptor"):
         names = [n for g, n in panels if g == group]
-        fig, axes = plt.subplots(1, len(names), figsize=(2.6 * len(names), 2.9), dpi=110, squeeze=False)
-        for ax, n in zip(axes[0], names):
+        cols = min(4, len(names))
+        rows = (len(names) + cols - 1) // cols
+        fig, axes = plt.subplots(rows, cols, figsize=(2.8 * cols, 2.9 * rows), dpi=110, squeeze=False)
+        for ax in axes.flat[len(names):]:
+            ax.axis("off")
+        for ax, n in zip(axes.flat, names):
             scored = panels[(group, n)]
             s = np.array([v for v, _ in scored])
             t = np.array([v for _, v in scored], dtype=float)
@@ -200,7 +211,8 @@ def plot(folder, runs):
             ax.set_ylim(0, 1.02)
             ax.tick_params(labelsize=6)
             ax.set_xlabel("published probability", fontsize=7)
-        axes[0][0].set_ylabel("fraction true (best candidate)", fontsize=7)
+        for row in axes:
+            row[0].set_ylabel("fraction true (best candidate)", fontsize=7)
         fig.tight_layout()
         fig.savefig(os.path.join(folder, f"reliability_by_{group}.png"))
         plt.close(fig)
