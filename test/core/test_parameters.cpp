@@ -85,6 +85,20 @@ TEST(Parameters, DefaultYamlDocumentsEveryParameterWithItsBuiltInDefault) {
       << "config/default.yaml and the built-in defaults disagree";
 }
 
+// The shipped presets load and validate, and say what they change: the most accurate one on real
+// frames is AKAZE with nothing else changed (docs/accuracy.md, the cost-accuracy frontier).
+TEST(Parameters, ShippedPresetsLoadAndChangeWhatTheySay) {
+  const DetectorParams accurate =
+      loadDetectorParams(YamlParameterSource::fromFile(configPath("real_cameras_accurate.yaml")));
+  EXPECT_NO_THROW(accurate.validate());
+  EXPECT_EQ(accurate.features.type, "akaze");
+  DetectorParams expected;
+  expected.features.type = "akaze";
+  EXPECT_EQ(describeParameters(accurate), describeParameters(expected)) << "the descriptor alone changes";
+  const DetectorParams camera = loadDetectorParams(YamlParameterSource::fromFile(configPath("bench_camera.yaml")));
+  EXPECT_NO_THROW(camera.validate());
+}
+
 TEST(Parameters, ReadsNestedYamlAndKeepsDefaultsForTheRest) {
   const auto source = YamlParameterSource::fromString(R"(
 orb:
