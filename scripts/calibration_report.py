@@ -30,19 +30,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import fit_scoring  # noqa: E402
 
-EDGES = (0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)  # the referee's default bins
 FIT_DESCRIPTORS = {"orb"}  # the default scorer was fitted on ORB runs only (candidate_scorer.hpp)
-
-
-def ece_of(scored, edges=EDGES):
-    """scored: (probability, is_true) of each query's best candidate; the referee's ECE."""
-    total, ece = len(scored), 0.0
-    for k, (lo, hi) in enumerate(zip(edges, edges[1:])):
-        last = k == len(edges) - 2
-        cell = [(s, t) for s, t in scored if lo <= s < hi or (last and s == hi)]
-        if cell:
-            ece += len(cell) * abs(sum(s for s, _ in cell) / len(cell) - sum(t for _, t in cell) / len(cell))
-    return ece / max(1, total)
+ece_of = fit_scoring.ece_of  # the bench referee's binning
 
 
 def published_metrics(bench, seq, csv, decision):

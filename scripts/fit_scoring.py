@@ -185,15 +185,12 @@ def metrics(run, weights, bias):
             "recall_at_half": right / n, "wrong_at_half": wrong}
 
 
-def ece(run, weights, bias, edges=(0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)):
-    """The bench referee's expected calibration error (../shared/bench/calibration.py) of each query's
-    best candidate, don't-care pairs skipped."""
-    best = {}
-    for i, _, f, lab, verified in run["rows"]:
-        s = published(bias + float(np.dot(weights, f)), verified)
-        if i not in best or s > best[i][0]:
-            best[i] = (s, lab)
-    scored = [(s, lab == 1) for s, lab in best.values() if lab >= 0]
+REFEREE_BINS = (0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)  # ../shared/bench/calibration.py's default bins
+
+
+def ece_of(scored, edges=REFEREE_BINS):
+    """The bench referee's expected calibration error (../shared/bench/calibration.py) of
+    (probability, is_true) pairs, one per query's best candidate."""
     total, err = len(scored), 0.0
     for k, (lo, hi) in enumerate(zip(edges, edges[1:])):
         last = k == len(edges) - 2
@@ -201,6 +198,16 @@ def ece(run, weights, bias, edges=(0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)):
         if cell:
             err += len(cell) * abs(sum(s for s, _ in cell) / len(cell) - sum(t for _, t in cell) / len(cell))
     return err / max(1, total)
+
+
+def ece(run, weights, bias):
+    """ece_of each query's best candidate under the weights, don't-care pairs skipped."""
+    best = {}
+    for i, _, f, lab, verified in run["rows"]:
+        s = published(bias + float(np.dot(weights, f)), verified)
+        if i not in best or s > best[i][0]:
+            best[i] = (s, lab)
+    return ece_of([(s, lab == 1) for s, lab in best.values() if lab >= 0])
 
 
 def main():
