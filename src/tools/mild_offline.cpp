@@ -125,7 +125,8 @@ void writeDetailsRow(std::ostream& details, size_t query, const mild::DetectionR
           << mild::formatScore(c.filter_probability) << "," << c.similarity << "," << v.matches << "," << v.inliers
           << "," << v.inlier_ratio << "," << v.coverage << "," << v.homography_share << "," << (v.verified ? 1 : 0)
           << "," << (c.accepted ? 1 : 0) << "," << r.stats.near_past_keyframes << "," << (v.fit_skipped ? 1 : 0) << ","
-          << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0) << "," << v.log10_false_alarms;
+          << r.stats.eligible_keyframes << "," << c.saliency << "," << (reported ? 1 : 0) << ","
+          << v.log10_false_alarms;
   for (double x : detector.scorer().features(mild::LoopDetector::evidenceOf(c), v)) details << "," << x;
   details << "\n";
 }

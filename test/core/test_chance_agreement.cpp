@@ -62,8 +62,8 @@ Features sampleFrame(int frame, double scale, int budget) {
 // The probability the default scorer gives the pair (query, candidate) described at `scale` with
 // `budget` ORB features, the filter and the similarity's saliency held fixed.
 double pairProbability(int query, int candidate, double scale, int budget) {
-  const Verification v = GeometricVerifier(VerificationParams{}).verify(sampleFrame(query, scale, budget),
-                                                    sampleFrame(candidate, scale, budget));
+  const Verification v = GeometricVerifier(VerificationParams{})
+                             .verify(sampleFrame(query, scale, budget), sampleFrame(candidate, scale, budget));
   CandidateScorer::Evidence e;
   e.filter_probability = 0.5;
   e.saliency = 6.0;

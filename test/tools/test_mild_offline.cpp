@@ -115,8 +115,12 @@ TEST_F(MildOffline, ScoresEveryCandidateAndWritesTheScorerFeatures) {
     std::stringstream rs(row);
     for (std::string c; std::getline(rs, c, ',');) cells.push_back(c);
     ASSERT_EQ(cells.size(), columns.size()) << row;
-    const double inliers = std::stod(cells[column("inliers")]);
-    EXPECT_NEAR(std::stod(cells[feature_columns[1]]), std::log(std::max(1.0, inliers)), 1e-4) << row;
+    // The geometry's evidence is its significance against chance (log10_nfa), not the raw inlier count.
+    const double log10_nfa = std::stod(cells[column("log10_nfa")]);
+    EXPECT_NEAR(std::stod(cells[feature_columns[1]]), std::log1p(std::max(0.0, -log10_nfa)), 1e-4) << row;
+    if (std::stoi(cells[column("inliers")]) <= 7) {
+      EXPECT_EQ(log10_nfa, 0.0) << "no more inliers than a minimal sample is no evidence: " << row;
+    }
     if (cells[column("verified")] == "0") ++unverified;
     EXPECT_EQ(
         written.count(cells[column("query")] + "," + cells[column("candidate")] + "," + cells[column("probability")]),

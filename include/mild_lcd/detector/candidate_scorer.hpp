@@ -7,12 +7,11 @@
 // a logistic model fitted by plain maximum likelihood (every candidate weighing the same, right or
 // wrong) on ORB runs of sequences with ground truth, rendered and real, at several keyframe steps
 // (scripts/fit_scoring.py; docs/accuracy.md says on which, how it was cross-validated, and how it
-// holds for BRISK and AKAZE, which it was not fitted on). Each input is scale-free: the saliency is a robust z against the query's own
-// similarities, the significance divides out the matches, the tolerance and the image area, so
-// that a count of inliers at 200 or 2,000 matches, 160 x 120 or 640 x 480, 256 or 512 bits is
-// read on one scale. The filter's temporal reasoning enters as one term beside the keyframe's own
-// evidence: a keyframe whose evidence is strong is not outvoted by a neighbour the filter's prior
-// prefers but whose evidence is nil.
+// holds for BRISK and AKAZE, which it was not fitted on). Each input is scale-free: the saliency is a robust z against
+// the query's own similarities, the significance divides out the matches, the tolerance and the image area, so that a
+// count of inliers at 200 or 2,000 matches, 160 x 120 or 640 x 480, 256 or 512 bits is read on one scale. The filter's
+// temporal reasoning enters as one term beside the keyframe's own evidence: a keyframe whose evidence is strong is not
+// outvoted by a neighbour the filter's prior prefers but whose evidence is nil.
 //
 // What a wrong loop costs against a missed one is not in the probability: it is the decision
 // (scoring/decision_probability, decisionForCost), so a back-end that weighs loops by their
@@ -41,7 +40,8 @@ struct ScoringParams {
   static void declare(Self& p, Visit&& v) {
     v("enabled", p.enabled, Bounds::any(),
       "The published loop probability of every candidate: a logistic model of the filter's probability and the "
-      "keyframe's own evidence, x = [logit(filter probability) within +-4, ln(1 + significance), ln(max(1, saliency))], "
+      "keyframe's own evidence, x = [logit(filter probability) within +-4, ln(1 + significance), ln(max(1, "
+      "saliency))], "
       "significance being -log10 of the verified model's number of false alarms given the matches, the inlier "
       "tolerance and the image area (0 when chance explains it) and saliency the robust z of its similarity "
       "among the query's eligible keyframes: p = 1 / (1 + exp(-(bias + weights . x))), fitted by maximum "
