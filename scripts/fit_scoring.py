@@ -21,10 +21,10 @@ scaled below the decision, candidate_scorer.hpp: belowDecision): the metrics and
 query's best candidate here apply it too.
 
 Usage:
-  fit_scoring.py RUN [RUN ...] [--l2 0.001] [--cv] [--cv-steps] [--json OUT.json]
+  fit_scoring.py RUN [RUN ...] [--l2 0.001] [--wrong-weight 1] [--decision 0.91] [--cv] [--cv-steps] [--json OUT.json]
 RUN is NAME=SEQUENCE_DIR:DETAILS.csv (SEQUENCE_DIR holds gt_loops.txt). With --cv each kind is left
 out in turn, the scorer fitted on the others and scored on the runs of the kind left out
-(recall@100%P, AP, and precision/recall at probability >= 0.5); with --cv-steps each keyframe step
+(recall@100%P, AP, and precision/recall at the decision, --decision); with --cv-steps each keyframe step
 likewise. Prints the fit on all runs as a YAML section.
 """
 import json
@@ -222,6 +222,11 @@ def main():
         WRONG_WEIGHT = float(args[args.index("--wrong-weight") + 1])
         args.remove(args[args.index("--wrong-weight") + 1])
         args.remove("--wrong-weight")
+    global DECISION
+    if "--decision" in args:
+        DECISION = float(args[args.index("--decision") + 1])
+        args.remove(args[args.index("--decision") + 1])
+        args.remove("--decision")
     json_out = None
     if "--json" in args:
         json_out = args[args.index("--json") + 1]
@@ -237,7 +242,7 @@ def main():
         sys.exit("the details files have different feature columns: re-run mild_offline on every sequence")
     report = {"features": runs[0]["features"], "cv": []}
     if cv:
-        print("| left out | run | recall@100%P | AP | precision at p >= 0.5 | recall at p >= 0.5 |")
+        print("| left out | run | recall@100%P | AP | precision at the decision | recall at the decision |")
         print("|---|---|---|---|---|---|")
         for kind in sorted({r["kind"] for r in runs}):
             w, b = fit([r for r in runs if r["kind"] != kind], l2)
@@ -247,7 +252,7 @@ def main():
                 print(f"| {kind} | {r['name']} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | "
                       f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} |")
     if cv_steps:
-        print("| left out step | run | recall@100%P | AP | precision at p >= 0.5 | recall at p >= 0.5 |")
+        print("| left out step | run | recall@100%P | AP | precision at the decision | recall at the decision |")
         print("|---|---|---|---|---|---|")
         report["cv_steps"] = []
         for step in sorted({r["step"] for r in runs}):
