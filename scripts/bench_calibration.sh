@@ -22,7 +22,7 @@ DESCRIPTORS="${DESCRIPTORS:-orb,brisk,akaze}"
 STEPS="${STEPS:-1,2,5,10}"
 PLOTS="${PLOTS:-$OUT}"
 mild_install_deps
-"$REPO/scripts/install_deps.sh" "$REPO/scripts/debian-packages-bench.txt"  # numpy, matplotlib
+"$REPO/scripts/install_deps.sh" "$REPO/scripts/debian-packages-bench.txt"  # numpy, PyYAML (matplotlib: debian-packages.txt)
 mild_configure_and_build --target mild_offline >/dev/null
 BIN="$BUILD_DIR/devel/lib/mild_lcd"
 mkdir -p "$OUT" "$CACHE/steps"
@@ -43,34 +43,17 @@ done
 for d in ${DESCRIPTORS//,/ }; do
   mkdir -p "$OUT/$d"
   # The user's configuration (or the defaults) with only features/type changed.
-  /usr/bin/python3 - "${CONFIG:-}" "$d" >"$OUT/$d/config.yaml" <<'EOF'
-import sys
-path, kind = sys.argv[1], sys.argv[2]
-lines = open(path).read().splitlines() if path else []
-out, in_features, done = [], False, False
-for line in lines:
-    if line.startswith("features:"):
-        in_features = True
-        out.append(line)
-        out.append(f"  type: {kind}")
-        done = True
-        continue
-    if in_features and line.strip().startswith("type:"):
-        continue
-    if line and not line.startswith(" ") and not line.startswith("#"):
-        in_features = False
-    out.append(line)
-if not done:
-    out += ["features:", f"  type: {kind}"]
-print("\n".join(out))
-EOF
+  /usr/bin/python3 -c 'import sys, yaml
+config = yaml.safe_load(open(sys.argv[1])) if sys.argv[1] else None
+config = config or {}
+config.setdefault("features", {})["type"] = sys.argv[2]
+yaml.safe_dump(config, sys.stdout)' "${CONFIG:-}" "$d" >"$OUT/$d/config.yaml"
 done
 
 export BIN OUT
 run_one() {  # descriptor/name=folder
   local id=${1%%=*} dir=${1#*=}
   local d=${id%%/*}
-  [[ -f "$OUT/$id.details.csv" && "$OUT/$id.details.csv" -nt "$BIN/mild_offline" && -z "${FORCE:-}" ]] && return 0
   "$BIN/mild_offline" --images "$dir" --config "$OUT/$d/config.yaml" --output "$OUT/$id.csv" \
     --details "$OUT/$id.details.csv.tmp" --fit-every-candidate --stats "$OUT/$id.json" >"$OUT/$id.log" 2>&1 \
     || { echo "[mild_lcd] mild_offline failed on $id (see $OUT/$id.log)" >&2; return 1; }

@@ -22,6 +22,7 @@ import json
 import math
 import os
 import re
+import subprocess
 import sys
 
 import numpy as np
@@ -34,32 +35,25 @@ FIT_DESCRIPTORS = {"orb"}  # the default scorer was fitted on ORB runs only (can
 ece_of = fit_scoring.ece_of  # the bench referee's binning
 
 
-def published_metrics(bench, seq, csv, decision):
-    sys.path.insert(0, bench)
-    import score  # noqa: E402
-    truth, dont_care, n_queries = load_truth(seq)
+def scored_best(score, seq, csv):
+    """(probability, is_true) of each query's best candidate in a candidates CSV, by the bench referee's
+    rules (score.py: at least 40 frames back, don't-care pairs skipped)."""
+    truth, dont_care, _ = fit_scoring.load_gt(seq)
     best = score.load_candidates(csv, 40)
-    ranked = sorted(((s, (i, j) in truth) for i, (j, s) in best.items() if (i, j) not in dont_care),
-                    key=lambda v: -v[0])
-    right = sum(1 for s, t in ranked if s >= decision and t)
-    wrong = sum(1 for s, t in ranked if s >= decision and not t)
+    return [(s, (i, j) in truth) for i, (j, s) in best.items() if (i, j) not in dont_care]
+
+
+def at_decision(scored, n_queries, decision):
+    right = sum(1 for s, t in scored if s >= decision and t)
+    wrong = sum(1 for s, t in scored if s >= decision and not t)
     return {"precision_at_decision": right / (right + wrong) if right + wrong else float("nan"),
             "recall_at_decision": right / max(1, n_queries), "wrong_at_decision": wrong}
 
 
-def load_truth(seq):
-    truth, dont_care, queries = fit_scoring.load_gt(seq)
-    return truth, dont_care, len(queries)
-
-
 def score_json(bench, seq, csv):
-    import subprocess
     out = subprocess.run(["/usr/bin/python3", f"{bench}/score.py", seq, csv, "--json"], capture_output=True,
-                         text=True)
-    try:
-        return json.loads(out.stdout)
-    except ValueError:
-        return {}
+                         text=True, check=True)
+    return json.loads(out.stdout)
 
 
 def kind_name(name):
@@ -90,23 +84,21 @@ def main():
                     "label": kind_name(name)})
         runs.append(run)
 
-    # 1. As published.
+    # 1. As published, by the bench's own referees.
     sys.path.insert(0, a.bench)
     import calibration  # noqa: E402
+    import score  # noqa: E402
     print(f"\nAs published (decision probability {decision}): ECE by ../shared/bench/calibration.py, "
           "recall@100%P / AP by score.py, each query's best candidate at the decision.\n")
     print("| descriptor | sequence | step | scored | ECE | recall@100%P / AP | precision / recall at the decision |")
     print("|---|---|---|---|---|---|---|")
-    published = {}
     for r in runs:
         c = calibration.calibration(r["seq"], r["csv"])
         s = score_json(a.bench, r["seq"], r["csv"])
-        m = published_metrics(a.bench, r["seq"], r["csv"], decision)
-        published[r["id"]] = {"ece": c["ece"], "scored": c["scored"], **s, **m}
+        m = at_decision(scored_best(score, r["seq"], r["csv"]), len(r["queries"]), decision)
         prec = "–" if math.isnan(m["precision_at_decision"]) else f"{m['precision_at_decision']:.3f}"
         print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | {c['scored']} | "
-              f"{c['ece']:.3f} | {s.get('recall_at_100_precision', float('nan')):.3f} / "
-              f"{s.get('average_precision', float('nan')):.3f} | {prec} ({m['wrong_at_decision']} wrong) / "
+              f"{c['ece']:.3f} | {s['recall_at_100_precision']:.3f} / {s['average_precision']:.3f} | {prec} ({m['wrong_at_decision']} wrong) / "
               f"{m['recall_at_decision']:.3f} |")
 
     # 2. Left out.
@@ -138,7 +130,7 @@ def main():
     print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" for h, v in worst.items()))
 
     if a.plots:
-        plot(a.plots, runs)
+        plot(a.plots, runs, score)
     if a.fit:
         w, b = fit_scoring.fit([r for r in runs if r["descriptor"] in FIT_DESCRIPTORS], fit_scoring.L2)
         print(f"\nscoring (fitted on every {', '.join(sorted(FIT_DESCRIPTORS))} run above):")
@@ -152,21 +144,17 @@ def default_decision():
         m = re.match(r"\s+decision_probability:\s*([\d.]+)", line)
         if m:
             return float(m.group(1))
-    return 0.5
+    sys.exit("config/default.yaml has no scoring/decision_probability: pass --decision")
 
 
-def plot(folder, runs):
+def plot(folder, runs, score):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    sys.path.insert(0, os.path.join(HERE))
     os.makedirs(folder, exist_ok=True)
-    sys_score = __import__("score")
     panels = {}
     for r in runs:
-        truth, dont_care, _ = fit_scoring.load_gt(r["seq"])
-        best = sys_score.load_candidates(r["csv"], 40)
-        scored = [(s, (i, j) in truth) for i, (j, s) in best.items() if (i, j) not in dont_care]
+        scored = scored_best(score, r["seq"], r["csv"])
         panels.setdefault(("kind", r["label"]), []).extend(scored)
         panels.setdefault(("descriptor", r["descriptor"]), []).extend(scored)
     for group in ("kind", "descriptor"):

@@ -55,7 +55,7 @@ def main():
     runs = {tag: [fit_scoring.load_run(f"{n}={sequence_dir(n, bench, cache)}:{out}/{n}.details.csv") for n in names]
             for tag, out in specs}
     kinds = sorted({r["kind"] for r in next(iter(runs.values()))})
-    print("| left out | chosen (by the other kinds) | run | recall@100%P | AP | precision at p >= 0.5 | recall at p >= 0.5 |")
+    print("| left out | chosen (by the other kinds) | run | recall@100%P | AP | precision at the decision | recall at the decision |")
     print("|---|---|---|---|---|---|---|")
     for kind in kinds:
         best = None
@@ -69,8 +69,8 @@ def main():
         for r in (r for r in runs[tag] if r["kind"] == kind):
             m = fit_scoring.metrics(r, w, b)
             print(f"| {kind} | {tag} | {r['name']} | {m['recall_at_100_precision']:.3f} | "
-                  f"{m['average_precision']:.3f} | {m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | "
-                  f"{m['recall_at_half']:.3f} |")
+                  f"{m['average_precision']:.3f} | {m['precision_at_decision']:.3f} ({m['wrong_at_decision']} wrong) | "
+                  f"{m['recall_at_decision']:.3f} |")
     print("\n| configuration | objective on all kinds (mean over kinds of (recall@100%P + AP) / 2) |")
     print("|---|---|")
     for tag, tag_runs in runs.items():

@@ -121,15 +121,19 @@ def row_weights(runs, rows_of):
     return np.array(x, dtype=float), np.array(y, dtype=float), np.array(w, dtype=float)
 
 
-def best_rows(run, weights, bias):
-    """Each query's best candidate under the current weights: the one the evaluation (and a user
-    acting on the best candidate) sees."""
+def best_scored(run, weights, bias):
+    """Each query's best candidate under the weights, as {query: (published probability, row)}: the
+    one the evaluation (and a user acting on the best candidate) sees."""
     best = {}
     for row in run["rows"]:
         s = published(bias + float(np.dot(weights, row[2])), row[4])
         if row[0] not in best or s > best[row[0]][0]:
             best[row[0]] = (s, row)
-    return [row for _, row in best.values()]
+    return best
+
+
+def best_rows(run, weights, bias):
+    return [row for _, row in best_scored(run, weights, bias).values()]
 
 
 def fit(runs, l2, rounds=3):
@@ -157,12 +161,7 @@ def fit_rows(x, y, w, l2):
 
 
 def metrics(run, weights, bias):
-    best = {}
-    for i, _, f, lab, verified in run["rows"]:
-        s = published(bias + float(np.dot(weights, f)), verified)
-        if i not in best or s > best[i][0]:
-            best[i] = (s, lab)
-    ranked = sorted(best.values(), key=lambda v: -v[0])
+    ranked = sorted(((s, row[3]) for s, row in best_scored(run, weights, bias).values()), key=lambda v: -v[0])
     n = max(1, len(run["queries"]))
     tp = fp = 0
     r100 = ap = prev = 0.0
@@ -181,8 +180,8 @@ def metrics(run, weights, bias):
     right = sum(1 for s, lab in ranked if s >= DECISION and lab == 1)
     wrong = sum(1 for s, lab in ranked if s >= DECISION and lab == 0)
     return {"recall_at_100_precision": r100, "average_precision": ap,
-            "precision_at_half": right / max(1, right + wrong) if right + wrong else 1.0,
-            "recall_at_half": right / n, "wrong_at_half": wrong}
+            "precision_at_decision": right / max(1, right + wrong) if right + wrong else 1.0,
+            "recall_at_decision": right / n, "wrong_at_decision": wrong}
 
 
 REFEREE_BINS = (0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0)  # ../shared/bench/calibration.py's default bins
@@ -202,12 +201,7 @@ def ece_of(scored, edges=REFEREE_BINS):
 
 def ece(run, weights, bias):
     """ece_of each query's best candidate under the weights, don't-care pairs skipped."""
-    best = {}
-    for i, _, f, lab, verified in run["rows"]:
-        s = published(bias + float(np.dot(weights, f)), verified)
-        if i not in best or s > best[i][0]:
-            best[i] = (s, lab)
-    return ece_of([(s, lab == 1) for s, lab in best.values() if lab >= 0])
+    return ece_of([(s, row[3] == 1) for s, row in best_scored(run, weights, bias).values() if row[3] >= 0])
 
 
 def main():
@@ -250,7 +244,7 @@ def main():
                 m = metrics(r, w, b)
                 report["cv"].append({"kind": kind, "run": r["name"], **m})
                 print(f"| {kind} | {r['name']} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | "
-                      f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} |")
+                      f"{m['precision_at_decision']:.3f} ({m['wrong_at_decision']} wrong) | {m['recall_at_decision']:.3f} |")
     if cv_steps:
         print("| left out step | run | recall@100%P | AP | precision at the decision | recall at the decision |")
         print("|---|---|---|---|---|---|")
@@ -261,7 +255,7 @@ def main():
                 m = metrics(r, w, b)
                 report["cv_steps"].append({"step": step, "run": r["name"], **m})
                 print(f"| {step} | {r['name']} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | "
-                      f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} |")
+                      f"{m['precision_at_decision']:.3f} ({m['wrong_at_decision']} wrong) | {m['recall_at_decision']:.3f} |")
     w, b = fit(runs, l2)
     report["weights"] = [round(float(v), 3) for v in w]
     report["bias"] = round(float(b), 3)

@@ -26,7 +26,7 @@ Verification checked(int inliers, bool verified, int matches = -1) {
   v.matches = matches < 0 ? 2 * inliers : matches;
   v.inliers = inliers;
   v.inlier_ratio = v.matches > 0 ? static_cast<double>(inliers) / v.matches : 0.0;
-  v.log10_false_alarms = log10FalseAlarms(v.matches, inliers, 0.0104, 7);
+  v.log10_false_alarms = log10FalseAlarms(v.matches, inliers, 0.0104, kFundamentalSample);
   return v;
 }
 

@@ -24,6 +24,11 @@ double chanceInlierProbability(const std::vector<cv::KeyPoint>& keypoints, doubl
 // uses to bound the significance a model could reach from above.
 constexpr double kLeastChanceInlierProbability = 1e-3;
 
+// The minimal samples of the two-view models verification fits: five points for an essential
+// matrix (both cameras known), seven for a fundamental one.
+constexpr int kEssentialSample = 5;
+constexpr int kFundamentalSample = 7;
+
 // log10 of the number of false alarms of a model fitted by minimal samples of `sample_size` matches
 // with `inliers` of `matches` agreeing, each match agreeing by chance with `chance_probability`:
 // NFA = (matches - sample_size) C(matches, inliers) C(inliers, sample_size) p^(inliers - sample_size).

@@ -274,7 +274,7 @@ bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, si
   Verification none, all;
   all.inliers = matches;
   all.verified = true;  // the best case: every match an inlier, and verified, at the smallest chance
-  all.log10_false_alarms = log10FalseAlarms(matches, matches, kLeastChanceInlierProbability, 5);
+  all.log10_false_alarms = log10FalseAlarms(matches, matches, kLeastChanceInlierProbability, kEssentialSample);
   const LoopCandidate& c = candidates[i];
   const double reachable = std::max(publishedProbability(c, none), publishedProbability(c, all));
   if (reachable >= params_.scoring.decision_probability) return true;  // it could be accepted

@@ -256,22 +256,20 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   out.verification.inlier_candidate_points = t_in;
   out.verification.inliers = inliers;
   out.verification.inlier_ratio = static_cast<double>(inliers) / static_cast<double>(out.matches.size());
-  {
-    // The tolerance of the fit in pixels, over the area either image's keypoints occupy.
-    const double chance = (chanceInlierProbability(query, params_.ransac_threshold) +
-                           chanceInlierProbability(train, params_.ransac_threshold)) /
-                          2.0;
-    const bool essential_model = query_camera.known() && train_camera.known();  // five-point, else seven-point samples
-    out.verification.log10_false_alarms =
-        log10FalseAlarms(out.verification.matches, inliers, chance, essential_model ? 5 : 7);
-  }
+  const bool essential = query_camera.known() && train_camera.known();
+  // The inliers against chance: the fit's tolerance in pixels over the area either image's keypoints
+  // occupy, for the model's minimal sample.
+  const double chance = (chanceInlierProbability(query, params_.ransac_threshold) +
+                         chanceInlierProbability(train, params_.ransac_threshold)) /
+                        2.0;
+  out.verification.log10_false_alarms =
+      log10FalseAlarms(out.verification.matches, inliers, chance, essential ? kEssentialSample : kFundamentalSample);
   out.verification.verified = inliers >= params_.min_inliers;
   if (!out.verification.verified) return out;
   // The layout of the inliers describes a loop, not a rejection: a homography fit per rejected
   // candidate was a fifth of verification on real frames, for figures nothing reads.
   out.verification.coverage = std::min(inlierCoverage(query, q_in), inlierCoverage(train, t_in));
   out.verification.homography_share = homographyShare(q_in, t_in);
-  const bool essential = query_camera.known() && train_camera.known();
   if (!essential) return out;
   if (!depth_in.empty()) {
     out.verification.pose = relativePoseFromDepth(q_in, depth_in, t_in, query_camera.matrix(), train_camera.matrix(),
