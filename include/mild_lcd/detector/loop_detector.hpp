@@ -227,6 +227,15 @@ class LoopDetector {
   }
   const CandidateScorer& scorer() const { return scorer_; }
 
+  // Verifies (when verifying) each candidate against the query, in the map it came from
+  // (maps[i] for candidates[i]), then scores and judges it; ranks them (rankCandidates). Without
+  // the query's features (nullptr) none is verified: each keeps its probability below the decision.
+  void judge(std::vector<LoopCandidate>& candidates, const Features* query,
+             const std::vector<const KeyframeMap*>& maps) const;
+  // Whether candidate c could reach the decision probability if verified with `matches` matches
+  // (all of them inliers): when false, verifying it (or fetching what that needs) changes no decision.
+  bool couldBeAccepted(const LoopCandidate& c, int matches) const;
+
  private:
   // Throws InvalidInput, changing nothing, for features this map cannot take.
   void checkFeatures(const Features& features) const;
@@ -235,15 +244,13 @@ class LoopDetector {
   // The probability candidate c is published with, given verification v: the scorer's, through the
   // verification gate (belowDecision) when v failed; the filter's when not verifying.
   double publishedProbability(const LoopCandidate& c, const Verification& v) const;
+  // The highest probability candidate c can be published with after a fit of `matches` matches.
+  double reachableProbability(const LoopCandidate& c, int matches) const;
   // Whether fitting candidate i (with `matches` descriptor matches) can change what is reported:
   // false when even `matches` inliers would leave it below the decision probability and below a
   // candidate already verified (verification/early_stop).
   bool fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
                     const std::vector<Verification>& earlier) const;
-  // Verifies (when verifying) each candidate against the query, in the map it came from
-  // (maps[i] for candidates[i]), then scores and judges it.
-  void judge(std::vector<LoopCandidate>& candidates, const Features& query,
-             const std::vector<const KeyframeMap*>& maps) const;
 
   DetectorParams params_;
   KeyframeMap map_;

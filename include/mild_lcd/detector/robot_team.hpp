@@ -13,6 +13,7 @@
 // LoopCandidate::robot tells which map a candidate is in. The pair filters are not saved with the
 // maps (database_file.hpp says why).
 
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -33,6 +34,7 @@ class RobotTeam {
 
   size_t size() const { return robots_.size(); }
   const std::string& name(size_t robot) const { return names_.at(robot); }
+  const std::vector<std::string>& names() const { return names_; }
   std::optional<size_t> find(const std::string& name) const;
   LoopDetector& robot(size_t robot) { return *robots_.at(robot); }
   const LoopDetector& robot(size_t robot) const { return *robots_.at(robot); }
@@ -43,6 +45,28 @@ class RobotTeam {
   // each candidate's robot its map's, at most max_candidates in all. Throws InvalidInput (changing
   // nothing) for a robot out of range and whatever the robot's detector refuses.
   DetectionResult process(Observation observation);
+
+  // A keyframe of a robot at another station (team across hosts), known by its summary's
+  // descriptors: asked of each of this team's maps, robot r's keyframes [0, eligible[r]) (whose
+  // station decides: StationLedger), each through a filter of the pair (remote robot, r). Changes
+  // only those filters. The candidates are not yet verified; needs_features says whether verifying
+  // any could change a decision (else judgeRemote without features decides the same).
+  struct RemoteAnswer {
+    std::vector<LoopCandidate> candidates;
+    std::vector<size_t> maps;  // the robot whose map holds candidates[i]
+    bool needs_features = false;
+    StepStats stats;
+  };
+  // Throws InvalidInput for an eligible list of the wrong size, or for more than kMaxRemoteRobots
+  // remote robots.
+  RemoteAnswer askRemote(const std::string& remote_robot, const DescriptorList& descriptors, size_t features,
+                         const std::vector<KeyframeIndex>& eligible);
+  // Verifies answer's candidates against the keyframe's whole features (nullptr: not fetched,
+  // none verified), scores and ranks them, at most max_candidates. The maps must not have been
+  // replaced since askRemote (they may have grown). query_robot is left 0: the query is remote.
+  DetectionResult judgeRemote(RemoteAnswer answer, const Features* features) const;
+  static constexpr size_t kMaxRemoteRobots = 256;
+  size_t remoteRobots() const { return remote_filters_.size(); }
 
   // After robot's map was replaced, reset or merged (a load, a reset): the pair filters that look
   // at it or from it start over from "no loop", since their hypotheses were its old keyframes.
@@ -69,6 +93,8 @@ class RobotTeam {
   std::vector<std::string> names_;
   std::vector<std::unique_ptr<LoopDetector>> robots_;
   std::vector<std::unique_ptr<TemporalFilter>> pair_filters_;  // [from * size() + to], none for from == to
+  // Per remote robot ("station/robot"): its filter into each of this team's maps.
+  std::map<std::string, std::vector<std::unique_ptr<TemporalFilter>>> remote_filters_;
 };
 
 }  // namespace mild

@@ -216,7 +216,7 @@ DetectionResult LoopDetector::process(Observation observation, const std::vector
   }
 
   auto start = Clock::now();
-  judge(result.candidates, features, maps);
+  judge(result.candidates, &features, maps);
   // max_candidates is per keyframe, however many maps were asked: the best after scoring.
   if (result.candidates.size() > max_candidates) {
     result.unreported.assign(std::make_move_iterator(result.candidates.begin() + static_cast<long>(max_candidates)),
@@ -235,9 +235,9 @@ DetectionResult LoopDetector::process(Observation observation, const std::vector
   return result;
 }
 
-void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features& query,
+void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features* query,
                          const std::vector<const KeyframeMap*>& maps) const {
-  if (verifier_ && !candidates.empty()) {
+  if (verifier_ && query && !candidates.empty()) {
     std::vector<Features> candidate_features;
     candidate_features.reserve(candidates.size());
     for (size_t i = 0; i < candidates.size(); ++i) candidate_features.push_back(maps[i]->features(candidates[i].index));
@@ -247,7 +247,7 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features&
         return fitCanMatter(candidates, i, matches, earlier);
       };
     }
-    std::vector<Verification> verifications = verifier_->verifyAll(query, candidate_features, needs_fit);
+    std::vector<Verification> verifications = verifier_->verifyAll(*query, candidate_features, needs_fit);
     if (verifications.size() != candidates.size()) {
       throw std::logic_error("the candidate verifier returned " + std::to_string(verifications.size()) +
                              " verifications for " + std::to_string(candidates.size()) + " candidates");
@@ -267,16 +267,23 @@ double LoopDetector::publishedProbability(const LoopCandidate& c, const Verifica
   return v.verified ? p : belowDecision(p, params_.scoring.decision_probability);
 }
 
-bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
-                                const std::vector<Verification>& earlier) const {
+double LoopDetector::reachableProbability(const LoopCandidate& c, int matches) const {
   // The published probability as a function of the inliers, at its highest over 0..matches (the
   // inliers are a subset of the matches; the scorer is monotone in them, either way).
   Verification none, all;
   all.inliers = matches;
   all.verified = true;  // the best case: every match an inlier, and verified, at the smallest chance
   all.log10_false_alarms = log10FalseAlarms(matches, matches, kLeastChanceInlierProbability, kEssentialSample);
-  const LoopCandidate& c = candidates[i];
-  const double reachable = std::max(publishedProbability(c, none), publishedProbability(c, all));
+  return std::max(publishedProbability(c, none), publishedProbability(c, all));
+}
+
+bool LoopDetector::couldBeAccepted(const LoopCandidate& c, int matches) const {
+  return reachableProbability(c, matches) >= params_.scoring.decision_probability;
+}
+
+bool LoopDetector::fitCanMatter(const std::vector<LoopCandidate>& candidates, size_t i, int matches,
+                                const std::vector<Verification>& earlier) const {
+  const double reachable = reachableProbability(candidates[i], matches);
   if (reachable >= params_.scoring.decision_probability) return true;  // it could be accepted
   // Below the decision either way: it matters only if it could outrank the query's best so far,
   // which is all the evaluation (and a consumer taking the best candidate) reads.

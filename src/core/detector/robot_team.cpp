@@ -1,8 +1,10 @@
 #include "mild_lcd/detector/robot_team.hpp"
 
+#include <algorithm>
 #include <set>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/filter/filters.hpp"
 
 namespace mild {
 
@@ -67,18 +69,71 @@ DetectionResult RobotTeam::process(Observation observation) {
   return robots_[robot]->process(std::move(observation), others, static_cast<uint32_t>(robot));
 }
 
+RobotTeam::RemoteAnswer RobotTeam::askRemote(const std::string& remote_robot, const DescriptorList& descriptors,
+                                             size_t features, const std::vector<KeyframeIndex>& eligible) {
+  if (eligible.size() != robots_.size()) throw InvalidInput("one eligible prefix per robot is needed");
+  auto it = remote_filters_.find(remote_robot);
+  if (it == remote_filters_.end()) {
+    if (remote_filters_.size() >= kMaxRemoteRobots) {
+      throw InvalidInput("more than " + std::to_string(kMaxRemoteRobots) + " remote robots");
+    }
+    std::vector<std::unique_ptr<TemporalFilter>> filters;
+    for (size_t r = 0; r < robots_.size(); ++r) filters.push_back(makeTemporalFilter(params().filter));
+    it = remote_filters_.emplace(remote_robot, std::move(filters)).first;
+  }
+  RemoteAnswer answer;
+  const size_t max_candidates = static_cast<size_t>(params().candidates.max_candidates);
+  for (size_t r = 0; r < robots_.size(); ++r) {
+    const KeyframeMap& map = robots_[r]->map();
+    const KeyframeIndex in_scope = std::min<KeyframeIndex>(eligible[r], static_cast<KeyframeIndex>(map.size()));
+    if (in_scope == 0) continue;
+    MapScope scope;
+    scope.eligible = in_scope;
+    MapAnswer a = robots_[r]->queryMap(map, descriptors, scope, *it->second[r], max_candidates);
+    answer.stats.query_ms += a.query_ms;
+    answer.stats.filter_ms += a.filter_ms;
+    answer.stats.query += a.query.stats;
+    answer.stats.eligible_keyframes += a.query.similarity.size();
+    for (LoopCandidate& c : a.candidates) {
+      c.robot = static_cast<uint32_t>(r);
+      const int matches = static_cast<int>(std::min(features, map.record(c.index).keypoints.size()));
+      answer.needs_features = answer.needs_features || robots_[r]->couldBeAccepted(c, matches);
+      answer.candidates.push_back(std::move(c));
+      answer.maps.push_back(r);
+    }
+  }
+  answer.stats.features = features;
+  return answer;
+}
+
+DetectionResult RobotTeam::judgeRemote(RemoteAnswer answer, const Features* features) const {
+  DetectionResult result;
+  std::vector<const KeyframeMap*> maps;
+  for (size_t r : answer.maps) maps.push_back(&robots_.at(r)->map());
+  robots_.front()->judge(answer.candidates, features, maps);
+  const size_t max_candidates = static_cast<size_t>(params().candidates.max_candidates);
+  if (answer.candidates.size() > max_candidates) answer.candidates.resize(max_candidates);
+  result.candidates = std::move(answer.candidates);
+  result.stats = answer.stats;
+  return result;
+}
+
 void RobotTeam::mapChanged(size_t robot) {
   for (size_t other = 0; other < robots_.size(); ++other) {
     if (other == robot) continue;
     pairFilter(robot, other).reset();
     pairFilter(other, robot).reset();
   }
+  for (auto& [remote, filters] : remote_filters_) filters.at(robot)->reset();
 }
 
 void RobotTeam::reset() {
   for (auto& r : robots_) r->map().reset();
   for (auto& f : pair_filters_) {
     if (f) f->reset();
+  }
+  for (auto& [remote, filters] : remote_filters_) {
+    for (auto& f : filters) f->reset();
   }
 }
 

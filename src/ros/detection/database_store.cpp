@@ -31,7 +31,8 @@ DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const s
       max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
   if (!database_path_.empty()) {
     try {
-      database_display_ = resolve(database_path_, false).display();
+      // A robot's folder (~robots) is made when its map will be saved: a first start finds it.
+      database_display_ = resolve(database_path_, save_on_shutdown_).display();
     } catch (const mild::Error& e) {
       throw mild::InvalidInput(std::string("parameter ~database_path: ") + e.what());
     }
@@ -53,7 +54,7 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
     const std::string message = prepared.report.message;
     const auto lock = shared.lock();
     mild::commitLoad(detector(shared).map(), std::move(prepared));
-    shared.team->mapChanged(robot_);  // the file holds it: no change to save
+    shared.mapReplaced(robot_, false);  // the file holds it: no change to save
     return message;
   } catch (const std::exception& e) {
     database_protected_ = true;
@@ -102,8 +103,7 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
   mild::LoadReport report = prepared.report;
   const auto lock = shared.lock();
   mild::commitLoad(detector(shared).map(), std::move(prepared));
-  shared.team->mapChanged(robot_);
-  ++shared.changes;
+  shared.mapReplaced(robot_);
   // A map loaded by hand is the user's decision: keyframes are taken again. ~database_path stays
   // protected (what was loaded is not what it holds), unless this was that very file.
   failure(shared).clear();
@@ -124,8 +124,7 @@ mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string&
     throw mild::InvalidInput(failure(shared) + "; load_database without merge replaces it");
   }
   mild::LoadReport report = mild::mergeState(detector(shared).map(), std::move(state), file.display());
-  shared.team->mapChanged(robot_);
-  ++shared.changes;
+  shared.mapReplaced(robot_);
   return report;
 }
 

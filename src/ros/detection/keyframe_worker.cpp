@@ -205,6 +205,7 @@ void KeyframeWorker::process(Staged staged) {
     // Only this call changes the detector; it throws before changing anything.
     out.result = team.process(std::move(observation));
     ++shared_.changes;
+    if (hooks_.stored) hooks_.stored(out.result);
     out.database_size = team.robot(robot).map().size();
     if (keypoints) {
       out.query_keypoints = team.robot(robot).map().record(out.result.query_index).keypoints;

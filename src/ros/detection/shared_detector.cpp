@@ -4,6 +4,22 @@
 
 namespace mild_lcd {
 
+void SharedDetector::mapReplaced(size_t robot, bool unsaved) {
+  team->mapChanged(robot);
+  ++replaced;
+  if (unsaved) ++changes;
+  if (on_map_replaced) on_map_replaced(robot);
+}
+
+void SharedDetector::resetMaps() {
+  team->reset();
+  ++replaced;
+  ++changes;
+  if (on_map_replaced) {
+    for (size_t r = 0; r < team->size(); ++r) on_map_replaced(r);
+  }
+}
+
 std::unique_lock<std::mutex> SharedDetector::lock() {
   std::unique_lock<std::mutex> held(mutex);
   applyPendingRetune();

@@ -68,6 +68,19 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg) {
   return f;
 }
 
+mild_lcd::Keyframe featuresToMsg(const mild::Features& features, int descriptor_bytes) {
+  mild_lcd::Keyframe msg;
+  msg.keypoints = keypointsToMsg(features.keypoints);
+  msg.descriptor_bytes = static_cast<uint32_t>(descriptor_bytes);
+  mild::appendDescriptorBytes(features.descriptors, msg.descriptors);
+  if (features.camera.known()) {
+    msg.camera_info.K = {
+        features.camera.fx, 0.0, features.camera.cx, 0.0, features.camera.fy, features.camera.cy, 0.0, 0.0, 1.0};
+  }
+  msg.depths = features.depths;
+  return msg;
+}
+
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
   const mild::CameraIntrinsics camera{msg.K[0], msg.K[4], msg.K[2], msg.K[5]};
   // Unknown when the entries read are zero, whatever the others hold: drivers without a

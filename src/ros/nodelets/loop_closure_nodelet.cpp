@@ -34,6 +34,7 @@
 #include "mild_lcd/ros/settings/detector_tuning.hpp"
 #include "mild_lcd/ros/settings/node_settings.hpp"
 #include "mild_lcd/ros/settings/ros_parameter_source.hpp"
+#include "mild_lcd/ros/team/team_link.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -112,10 +113,27 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     debug_cache_ = std::make_unique<DebugImageCache>(static_cast<size_t>(settings_.debug_image_cache),
                                                      static_cast<size_t>(settings_.debug_image_cache_mb) << 20);
     KeyframeWorker::Hooks hooks;
-    hooks.startup = [this] { loadOnStart(); };
+    hooks.startup = [this] {
+      loadOnStart();
+      if (team_link_) team_link_->start();  // on the maps just loaded
+    };
     hooks.publish = [this](const ProcessedKeyframe& k) { publish(k); };
     hooks.wants_keypoints = [this] { return debug_pub_.getNumSubscribers() > 0; };
     hooks.warn = [this](const std::string& what) { NODELET_WARN_THROTTLE(2.0, "%s", what.c_str()); };
+    if (!settings_.team_station.empty()) {
+      // The ledger is saved with the maps, and read back only when they are.
+      const std::string ledger =
+          settings_.save_on_shutdown || settings_.load_on_start
+              ? robots_.front()->store->directory() + "/" + settings_.team_station + ".team_ledger.json"
+              : "";
+      team_link_ = std::make_unique<TeamLink>(nh, settings_, shared_, shared_.team->names(), ledger,
+                                              [this](size_t robot, const mild_lcd::LoopClosure::ConstPtr& msg) {
+                                                robots_.at(robot)->loop_pub.publish(msg);
+                                                if (all_pub_) all_pub_.publish(msg);
+                                              });
+      shared_.on_map_replaced = [this](size_t robot) { team_link_->mapReplaced(robot); };
+      hooks.stored = [this](const mild::DetectionResult& result) { team_link_->stored(result); };
+    }
     InputLimits limits;
     limits.max_image_pixels = static_cast<uint64_t>(settings_.max_image_pixels);
     limits.max_keyframe_features = static_cast<size_t>(settings_.max_keyframe_features);
@@ -137,6 +155,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     }
     diagnostics_ = std::make_unique<DetectorDiagnostics>(nh, pnh, getName(), shared_, *worker_);
     tuning_ = std::make_unique<DetectorTuning>(pnh, getName(), shared_);
+    if (team_link_) diagnostics_->add("team", [this](auto& stat) { team_link_->diagnose(stat); });
     worker_->start();  // loads ~database_path first when ~load_on_start, then keyframes
     if (settings_.save_on_shutdown && settings_.autosave_period > 0) {
       autosave_ =
@@ -203,6 +222,13 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         NODELET_WARN_THROTTLE(60.0, "autosave failed (the previous file is kept): %s", e.what());
       }
     }
+    if (team_link_) {
+      try {
+        team_link_->save();
+      } catch (const std::exception& e) {
+        NODELET_WARN_THROTTLE(60.0, "could not save the station ledger: %s", e.what());
+      }
+    }
   }
 
   // Runs on the worker thread, without the detector lock.
@@ -233,6 +259,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       if (robot->inputs) robot->inputs->shutdown();
     }
     tuning_.reset();
+    if (team_link_) team_link_->stop();  // no peer's work after this; what it had not taken is asked again
     for (const auto& robot : robots_) {
       if (robot->services) robot->services->shutdown();
     }
@@ -253,6 +280,13 @@ class LoopClosureNodelet : public nodelet::Nodelet {
           if (!message.empty()) shutdownMessage(getName(), message, robot->store->databaseProtected());
         } catch (const std::exception& e) {
           shutdownMessage(getName(), std::string("could not save the database on shutdown: ") + e.what(), true);
+        }
+      }
+      if (team_link_ && settings_.save_on_shutdown) {
+        try {
+          team_link_->save();  // after the maps: it numbers their keyframes
+        } catch (const std::exception& e) {
+          shutdownMessage(getName(), std::string("could not save the station ledger: ") + e.what(), true);
         }
       }
     }
@@ -280,6 +314,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   std::unique_ptr<DetectorTuning> tuning_;
   std::unique_ptr<PeriodicTask> autosave_;
   std::unique_ptr<SigtermAsShutdown> sigterm_;
+  std::unique_ptr<TeamLink> team_link_;  // with ~team/station
 };
 
 }  // namespace mild_lcd

@@ -58,4 +58,9 @@ void DetectorDiagnostics::diagnose(diagnostic_updater::DiagnosticStatusWrapper& 
   status.add("mean keyframe (ms)", c.mean_ms);
 }
 
+void DetectorDiagnostics::add(const std::string& name,
+                              std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)> task) {
+  updater_->add(name, std::move(task));
+}
+
 }  // namespace mild_lcd

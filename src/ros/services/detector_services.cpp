@@ -73,8 +73,7 @@ bool DetectorServices::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Res
   const size_t pending = worker_.discardPending();
   const auto lock = shared_.lock();
   const size_t keyframes = shared_.team->keyframes();
-  shared_.team->reset();
-  ++shared_.changes;
+  shared_.resetMaps();
   for (std::string& f : shared_.failure) f.clear();
   debug_cache_.clear();
   worker_.refreshSnapshot(*shared_.team);

@@ -8,6 +8,7 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/team/station_ledger.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -71,6 +72,20 @@ void visitSettings(Settings& s, Visit&& visit) {
         "names of the robots this node serves, space- or comma-separated (`robot1 robot2`): each robot's topics and "
         "services go under its name (`robot1/keyframe`, `robot1/loop_closure`, `robot1/save_database`, ...), "
         "`loop_closures_all` carries every robot's; empty: one robot, names as above");
+  visit("team/station", s.team_station, Bounds::any(),
+        "this node's name in a team across hosts (1-32 of [a-z0-9_], starting with a letter): it finds the loops "
+        "between its robots and other stations' over /mild_team/ topics (docs/multi_robot.md); empty: no team");
+  visit("team/summary_bytes", s.team_summary_bytes, Bounds::in(64, 1 << 20),
+        "descriptor bytes of the summary pushed to the other stations per keyframe (its strongest descriptors: 7000 "
+        "is 218 ORB descriptors)");
+  visit("team/backfill_batch", s.team_backfill_batch, Bounds::in(1, 1000),
+        "summaries asked for, and sent, per request when a station fills a gap (after a link came back)");
+  visit("team/peer_timeout", s.team_peer_timeout, Bounds::in(0.5, 3600),
+        "seconds without a peer's heartbeat after which it is reported disconnected");
+  visit("team/max_requests_per_second", s.team_max_requests_per_second, Bounds::in(1, 100000),
+        "requests served per second to one peer (a burst of twice as many); more are refused as busy and counted");
+  visit("team/max_pending_pulls", s.team_max_pending_pulls, Bounds::in(1, 10000),
+        "per peer, keyframes waiting for their features to be verified; its next summaries wait until fewer do");
 }
 
 template <class T>
@@ -126,6 +141,10 @@ NodeSettings NodeSettings::load(const mild::ParameterSource& source, const std::
     if (std::find(robots.begin(), robots.begin() + static_cast<long>(i), r) != robots.begin() + static_cast<long>(i)) {
       throw InvalidInput("parameter ~robots names '" + r + "' twice");
     }
+  }
+  if (!s.team_station.empty() && !mild::validStationName(s.team_station)) {
+    throw InvalidInput("parameter ~team/station: '" + s.team_station +
+                       "' is not a station name (1-32 of [a-z0-9_], starting with a letter)");
   }
   if (s.image_transport.empty())
     throw InvalidInput("parameter ~image_transport must name a transport (raw, compressed, ...)");

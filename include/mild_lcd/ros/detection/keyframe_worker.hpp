@@ -63,8 +63,11 @@ class KeyframeWorker {
   struct Hooks {
     std::function<void()> startup;                          // runs first, on the worker thread
     std::function<void(const ProcessedKeyframe&)> publish;  // after each keyframe, unlocked
-    std::function<bool()> wants_keypoints;                  // copy keypoints for the debug image?
-    std::function<void(const std::string&)> warn;           // throttling is the caller's
+    // Right after a keyframe was stored, still under the detector lock (the team across hosts
+    // numbers it in the order the maps grow). Must not throw.
+    std::function<void(const mild::DetectionResult&)> stored;
+    std::function<bool()> wants_keypoints;         // copy keypoints for the debug image?
+    std::function<void(const std::string&)> warn;  // throttling is the caller's
     // A keyframe is ready for the detector: decoded and, with the extraction thread, its features
     // extracted (or it was found unusable); on the thread that did it, before the detector sees it.
     // has_features: its features are known (extracted, or they came as such). For tests: whether

@@ -1,6 +1,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -25,6 +26,20 @@ struct SharedDetector {
   // Bumped by everything that changes a map (a keyframe, a load, a merge, a reset), so that a
   // periodic save writes only what changed. Under mutex.
   uint64_t changes = 0;
+
+  // Bumped by everything that replaces a map's keyframes (a load, a merge, a reset): what was
+  // asked of the old keyframes (a team pull in flight) is not judged on the new ones. Under mutex.
+  uint64_t replaced = 0;
+  // Told, under mutex, of each robot whose map was replaced (the team across hosts renumbers).
+  std::function<void(size_t robot)> on_map_replaced;
+
+  // The one place maps change other than by a keyframe: the team's filters that looked at the old
+  // keyframes start over (RobotTeam::mapChanged), `replaced` and `changes` move, listeners are
+  // told. Under mutex, after the map was loaded or merged. `unsaved`: false when the map is what a
+  // file holds (loaded at start-up): `changes` stays, so no save follows.
+  void mapReplaced(size_t robot, bool unsaved = true);
+  // Empties every map (RobotTeam::reset), the same way. Under mutex.
+  void resetMaps();
 
   mild::LoopDetector& robot(size_t r) { return team->robot(r); }
   void setTeam(std::unique_ptr<mild::RobotTeam> t) {

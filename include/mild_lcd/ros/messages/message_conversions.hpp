@@ -40,6 +40,8 @@ mild::Features featuresFromMsg(const mild_lcd::Keyframe& msg);
 constexpr double kMinFocalPixels = 1.0;
 constexpr double kMaxFocalPixels = 1e6;
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg);
+// A keyframe's features as a Keyframe message (no header, no id): what featuresFromMsg reads back.
+mild_lcd::Keyframe featuresToMsg(const mild::Features& features, int descriptor_bytes);
 
 // The answer published for one processed keyframe (candidate stamps come from the candidates).
 // With `correspondences`, verified candidates carry their inlier matches. `robot_names`: the

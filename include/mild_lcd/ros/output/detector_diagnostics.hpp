@@ -3,6 +3,7 @@
 // The nodelet's diagnostics (diagnostic_updater): database size and memory, queue, dropped /
 // rejected / discarded keyframes, timings, and an ERROR while a start-up load failure stands.
 
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -18,6 +19,8 @@ class DetectorDiagnostics {
  public:
   DetectorDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& pnh, const std::string& name, SharedDetector& shared,
                       KeyframeWorker& worker);
+  // Another status the node reports beside the detector's (the team link's, per peer).
+  void add(const std::string& name, std::function<void(diagnostic_updater::DiagnosticStatusWrapper&)> task);
 
  private:
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);

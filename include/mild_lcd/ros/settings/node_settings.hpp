@@ -35,6 +35,13 @@ struct NodeSettings {
   int max_database_dir_mb = 65536;  // and the megabytes its files may hold before a save is refused
   int max_match_features = 10000;   // per side of a sparse_match request
   std::string robots;               // names of the robots served, space- or comma-separated; "" = one
+  // A team across hosts (ros/team/team_link.hpp): this station's name ("" = none) and its bounds.
+  std::string team_station;
+  int team_summary_bytes = 7000;          // descriptor bytes per keyframe summary pushed to the peers
+  int team_backfill_batch = 20;           // summaries per request when filling a gap
+  double team_peer_timeout = 5.0;         // seconds without a heartbeat: the peer is disconnected
+  int team_max_requests_per_second = 20;  // from one peer; more are refused (busy) and counted
+  int team_max_pending_pulls = 32;        // per peer: keyframes waiting for their features
 
   // The robots' names ("" = one robot, topics without a prefix), checked by load().
   std::vector<std::string> robotNames() const;

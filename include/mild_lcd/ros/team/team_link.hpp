@@ -1,0 +1,168 @@
+#pragma once
+
+// A station of a team across hosts (~team/station): this node's robots' maps answer the other
+// stations' keyframes, and theirs answer ours, while running. Design and figures:
+// docs/multi_robot.md, "Stations on several hosts".
+//
+// - Push: every keyframe stored here is summarised (its strongest descriptors, PlaceSummary) and
+//   published once on /mild_team/summaries.
+// - Decide: a peer's summary is asked of this station's maps (RobotTeam::askRemote) where the
+//   StationLedger says this station decides. When a candidate could be accepted, the keyframe's
+//   whole features are pulled from its station (/mild_team/<peer>/requests, answered on
+//   /mild_team/<this>/features, refusable when busy) and the candidates verified and scored as the
+//   station's own. An accepted loop is published on the map robot's loop_closure here, and sent to
+//   the query's station (/mild_team/<peer>/loops), numbered, resent until acknowledged, which
+//   publishes it on the query robot's loop_closure: once on each side.
+// - Links drop: summaries are taken from each peer in their order only; a gap (a summary lost,
+//   a heartbeat announcing more) is asked for in batches (~team/backfill_batch) until filled, so a
+//   revisit made during an outage is found when the link is back ("late", counted). Nothing waits
+//   for a peer: the robots' own keyframes go through the worker as always; peer work is done on
+//   this link's own thread, and holds the detector lock only to query, judge and serve.
+// - Every message is topic traffic (no service calls, which could block on a dead link and need
+//   one master): relaying /mild_team/ between masters gives the same behaviour.
+// - Hostile peers: malformed, oversized or other-width messages are refused and counted; more than
+//   ~team/max_requests_per_second requests from one peer are refused as busy; unknown keyframes
+//   get UNKNOWN. Every inbox is bounded.
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <ros/ros.h>
+
+#include "mild_lcd/LoopClosure.h"
+#include "mild_lcd/PlaceSummary.h"
+#include "mild_lcd/TeamFeatures.h"
+#include "mild_lcd/TeamLoop.h"
+#include "mild_lcd/TeamRequest.h"
+#include "mild_lcd/TeamStatus.h"
+#include "mild_lcd/detector/robot_team.hpp"
+#include "mild_lcd/ros/detection/shared_detector.hpp"
+#include "mild_lcd/ros/settings/node_settings.hpp"
+#include "mild_lcd/team/station_ledger.hpp"
+
+namespace mild_lcd {
+
+class TeamLink {
+ public:
+  // Publishes a loop on robot's loop_closure (and loop_closures_all).
+  using PublishLoop = std::function<void(size_t robot, const mild_lcd::LoopClosure::ConstPtr&)>;
+
+  // nh: the node's namespace handle (topics go under /mild_team/, absolute). ledger_path: where
+  // the ledger is saved beside the maps (empty: never). Throws InvalidInput for a bad station name.
+  TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
+           std::vector<std::string> robot_names, std::string ledger_path, PublishLoop publish);
+  ~TeamLink();
+
+  // After the maps were loaded: reads the ledger when its file exists (a restart), subscribes and
+  // starts the link's thread. Throws IoError/InvalidInput for an unreadable ledger.
+  void start();
+  // Unsubscribes and joins the thread; what waits is kept in the ledger's counts (asked again).
+  void stop();
+  // Writes the ledger (atomically) when a path was given. Under no lock; takes the detector's.
+  void save();
+
+  // Under the detector lock, right after a keyframe was stored: numbered and summarised.
+  void stored(const mild::DetectionResult& result);
+  // Under the detector lock: robot's map was replaced.
+  void mapReplaced(size_t robot);
+
+  // One key-value per peer and figure, for diagnostics.
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat);
+
+ private:
+  struct Waiting {  // a summary received ahead of its turn
+    mild_lcd::PlaceSummary::ConstPtr summary;
+    bool backfill = false;  // sent on request, to fill a gap: a loop it gives is found late
+  };
+  struct Peer {
+    std::chrono::steady_clock::time_point last_seen{};
+    bool seen = false;
+    bool compatible = true;                                  // its descriptors have this station's width
+    uint64_t summaries = 0;                                  // it has numbered, by its last heartbeat
+    uint64_t acknowledged = 0;                               // loops of ours it took, by its last heartbeat
+    std::chrono::steady_clock::time_point backfill_asked{};  // the last gap request
+    uint64_t taken = 0;   // its summaries taken (the ledger's count, readable under mutex_)
+    double tokens = 0.0;  // its requests' budget (refilled per second)
+    std::chrono::steady_clock::time_point refilled{};
+    std::map<uint64_t, Waiting> waiting;                      // by number: the next to take, and any ahead of a gap
+    std::deque<mild_lcd::TeamLoop::ConstPtr> unacknowledged;  // loops sent, by number
+    size_t pending_pulls = 0;
+    uint64_t summaries_in = 0, summary_bytes_in = 0, features_in = 0, feature_bytes_in = 0;
+    uint64_t bytes_out = 0, loops_decided = 0, loops_found_late = 0, refused = 0, duplicates = 0, reconnects = 0;
+    ros::Publisher to_requests, to_summaries, to_features, to_loops;  // to its inbox
+  };
+  struct Pending {  // a peer's keyframe waiting for its features
+    std::string peer;
+    mild_lcd::PlaceSummary::ConstPtr summary;
+    mild::RobotTeam::RemoteAnswer answer;
+    uint64_t replaced = 0;  // SharedDetector::replaced when asked
+    bool late = false;
+    std::chrono::steady_clock::time_point asked{};
+    int attempts = 0;
+  };
+
+  void run();
+  void tick();  // heartbeat, gap requests, resends: once a second
+  bool takeNextSummary();
+  void take(const std::string& peer, const mild_lcd::PlaceSummary::ConstPtr& summary, bool late);
+  void judged(const Pending& pending, const mild::Features* features);
+  void serve(const mild_lcd::TeamRequest::ConstPtr& request);
+  void onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply);
+  void onLoop(const mild_lcd::TeamLoop::ConstPtr& loop);
+  void sendPull(uint64_t request_id, Pending& pending);
+
+  void onSummary(const mild_lcd::PlaceSummary::ConstPtr& msg);
+  void onBackfill(const mild_lcd::PlaceSummary::ConstPtr& msg);
+  void queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool backfill);
+  void onStatus(const mild_lcd::TeamStatus::ConstPtr& msg);
+  void onRequest(const mild_lcd::TeamRequest::ConstPtr& msg);
+  void onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg);
+  void onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg);
+
+  // Under mutex_: the peer by name, made on first sight (at most kMaxPeers), or nullptr.
+  Peer* peer(const std::string& name);
+  bool connected(const Peer& p) const;
+  mild_lcd::PlaceSummary::Ptr summaryOf(uint64_t seq);  // under the detector lock
+  size_t robotIndex(const std::string& name) const;     // robot_names_.size() when unknown
+
+  static constexpr size_t kMaxPeers = 64;
+  static constexpr size_t kMaxInbox = 1000;  // requests, replies and loops waiting for the thread
+
+  ros::NodeHandle nh_;
+  const NodeSettings settings_;
+  SharedDetector& shared_;
+  const std::vector<std::string> robot_names_;
+  const std::string ledger_path_;
+  PublishLoop publish_;
+  mild::StationLedger ledger_;  // under the detector lock
+  size_t summary_descriptors_ = 0;
+  int descriptor_bytes_ = 0;
+
+  std::mutex mutex_;  // everything below; never held while taking the detector lock
+  std::condition_variable wake_;
+  bool stopping_ = false;
+  std::map<std::string, Peer> peers_;
+  std::deque<mild_lcd::TeamRequest::ConstPtr> requests_;
+  std::deque<mild_lcd::TeamFeatures::ConstPtr> replies_;
+  std::deque<mild_lcd::TeamLoop::ConstPtr> loops_;
+  std::map<uint64_t, Pending> pending_;  // by request id
+  uint64_t next_request_ = 1;
+  uint64_t refused_ = 0;  // from no peer (malformed names, too many peers, full inboxes)
+  uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
+
+  ros::Publisher summaries_pub_, status_pub_;
+  ros::Subscriber summaries_sub_, backfill_sub_, status_sub_, requests_sub_, features_sub_, loops_sub_;
+  std::thread thread_;
+};
+
+}  // namespace mild_lcd

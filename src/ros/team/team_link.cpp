@@ -1,0 +1,639 @@
+#include "mild_lcd/ros/team/team_link.hpp"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <ros/serialization.h>
+#include <boost/make_shared.hpp>
+
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/ros/messages/message_conversions.hpp"
+
+namespace mild_lcd {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// A peer's message larger than this is refused: a whole keyframe of 10,000 features of 64 bytes
+// with keypoints is well under 2 MB.
+constexpr size_t kMaxMessageBytes = 4u << 20;
+constexpr size_t kMaxSummaryDescriptors = 10000;
+constexpr size_t kMaxNameLength = 64;
+// Asked again when unanswered this long (a message published before the peer's subscriber
+// connected is lost; the link may have dropped it).
+constexpr std::chrono::seconds kResendAfter{2};
+
+template <class M>
+uint64_t bytesOf(const M& msg) {
+  return ros::serialization::serializationLength(msg);
+}
+
+std::string topic(const std::string& station, const std::string& name) { return "/mild_team/" + station + "/" + name; }
+
+// The robots' names on the wire: a station serving one robot (named "") calls it by its own name.
+std::vector<std::string> wireNames(std::vector<std::string> names, const std::string& station) {
+  for (std::string& n : names) {
+    if (n.empty()) n = station;
+  }
+  return names;
+}
+
+mild::PlaceSummary coreSummary(const mild_lcd::PlaceSummary& msg) {
+  mild::PlaceSummary s;
+  s.station = msg.station;
+  s.seq = msg.seq;
+  s.robot = msg.robot;
+  s.id = msg.id;
+  s.features = msg.features;
+  for (size_t i = 0; i < msg.known_stations.size() && i < msg.known_counts.size(); ++i) {
+    s.known.emplace_back(msg.known_stations[i], msg.known_counts[i]);
+  }
+  return s;
+}
+
+}  // namespace
+
+TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
+                   std::vector<std::string> robot_names, std::string ledger_path, PublishLoop publish)
+    : nh_(std::move(nh)),
+      settings_(settings),
+      shared_(shared),
+      robot_names_(wireNames(std::move(robot_names), settings.team_station)),
+      ledger_path_(std::move(ledger_path)),
+      publish_(std::move(publish)),
+      ledger_(settings.team_station, robot_names_.size()) {
+  descriptor_bytes_ = shared_.team->params().features.descriptorBytes();
+  summary_descriptors_ = mild::descriptorsWithin(static_cast<size_t>(settings_.team_summary_bytes), descriptor_bytes_);
+}
+
+TeamLink::~TeamLink() { stop(); }
+
+void TeamLink::start() {
+  if (!ledger_path_.empty() && settings_.load_on_start && std::filesystem::exists(ledger_path_)) {
+    std::ifstream in(ledger_path_);
+    std::stringstream text;
+    text << in.rdbuf();
+    if (!in) throw mild::IoError("cannot read the station ledger " + ledger_path_);
+    const auto lock = shared_.lock();
+    ledger_.fromText(text.str());
+  }
+  {
+    const auto lock = shared_.lock();
+    std::lock_guard<std::mutex> guard(mutex_);
+    for (const std::string& name : ledger_.peers()) {
+      if (Peer* p = peer(name)) p->taken = ledger_.received(name);
+    }
+  }
+  const std::string& me = settings_.team_station;
+  summaries_pub_ = nh_.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000);
+  status_pub_ = nh_.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
+  const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
+  summaries_sub_ = nh_.subscribe("/mild_team/summaries", 1000, &TeamLink::onSummary, this, hints);
+  backfill_sub_ = nh_.subscribe(topic(me, "summaries"), 1000, &TeamLink::onBackfill, this, hints);
+  status_sub_ = nh_.subscribe("/mild_team/status", 100, &TeamLink::onStatus, this, hints);
+  requests_sub_ = nh_.subscribe(topic(me, "requests"), 1000, &TeamLink::onRequest, this, hints);
+  features_sub_ = nh_.subscribe(topic(me, "features"), 100, &TeamLink::onFeaturesMsg, this, hints);
+  loops_sub_ = nh_.subscribe(topic(me, "loops"), 1000, &TeamLink::onLoopMsg, this, hints);
+  thread_ = std::thread([this] { run(); });
+}
+
+void TeamLink::stop() {
+  summaries_sub_.shutdown();
+  backfill_sub_.shutdown();
+  status_sub_.shutdown();
+  requests_sub_.shutdown();
+  features_sub_.shutdown();
+  loops_sub_.shutdown();
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void TeamLink::save() {
+  if (ledger_path_.empty()) return;
+  std::string text;
+  {
+    const auto lock = shared_.lock();
+    text = ledger_.toText();
+  }
+  // Written beside, then renamed over: a crash leaves the previous ledger whole.
+  const std::string temporary = ledger_path_ + ".writing";
+  {
+    std::ofstream out(temporary, std::ios::trunc);
+    out << text;
+    out.flush();
+    if (!out) throw mild::IoError("cannot write the station ledger " + temporary);
+  }
+  std::error_code error;
+  std::filesystem::rename(temporary, ledger_path_, error);
+  if (error) throw mild::IoError("cannot replace the station ledger " + ledger_path_ + ": " + error.message());
+}
+
+// --- this station's keyframes ---
+
+void TeamLink::stored(const mild::DetectionResult& result) {
+  const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index);
+  const mild_lcd::PlaceSummary::ConstPtr msg = summaryOf(seq);
+  summaries_pub_.publish(msg);
+  std::lock_guard<std::mutex> guard(mutex_);
+  ++summaries_out_;
+  summary_bytes_out_ += bytesOf(*msg);
+}
+
+void TeamLink::mapReplaced(size_t robot) { ledger_.mapReplaced(robot); }
+
+mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
+  const mild::StationLedger::Own& own = ledger_.own(seq);
+  auto msg = boost::make_shared<mild_lcd::PlaceSummary>();
+  msg->station = settings_.team_station;
+  msg->seq = seq;
+  msg->robot = robot_names_.at(own.robot);
+  msg->id = own.id;
+  msg->descriptor_bytes = static_cast<uint32_t>(descriptor_bytes_);
+  for (const auto& [peer, count] : own.known) {
+    msg->known_stations.push_back(peer);
+    msg->known_counts.push_back(count);
+  }
+  const mild::KeyframeMap& map = shared_.robot(own.robot).map();
+  // A map replaced since (a load, a reset) no longer holds it: the summary goes without
+  // descriptors, so that the peer counts it and finds nothing in it.
+  if (const auto index = map.find(own.id)) {
+    const mild::Features features = map.features(*index);
+    msg->stamp = stampOf(map.record(*index).stamp);
+    msg->features = static_cast<uint32_t>(features.descriptors.size());
+    mild::appendDescriptorBytes(mild::strongestDescriptors(features, summary_descriptors_), msg->descriptors);
+  }
+  return msg;
+}
+
+// --- what arrives (callbacks: they only queue) ---
+
+TeamLink::Peer* TeamLink::peer(const std::string& name) {
+  auto it = peers_.find(name);
+  if (it != peers_.end()) return &it->second;
+  if (name == settings_.team_station || !mild::validStationName(name) || peers_.size() >= kMaxPeers) return nullptr;
+  Peer& p = peers_[name];
+  // Advertised on first sight, so that the connections exist by the time they are needed.
+  p.to_requests = nh_.advertise<mild_lcd::TeamRequest>(topic(name, "requests"), 1000);
+  p.to_summaries = nh_.advertise<mild_lcd::PlaceSummary>(topic(name, "summaries"), 1000);
+  p.to_features = nh_.advertise<mild_lcd::TeamFeatures>(topic(name, "features"), 100);
+  p.to_loops = nh_.advertise<mild_lcd::TeamLoop>(topic(name, "loops"), 1000);
+  p.tokens = 2.0 * settings_.team_max_requests_per_second;
+  p.refilled = Clock::now();
+  return &p;
+}
+
+bool TeamLink::connected(const Peer& p) const {
+  return p.seen && Clock::now() - p.last_seen < std::chrono::duration<double>(settings_.team_peer_timeout);
+}
+
+void TeamLink::onSummary(const mild_lcd::PlaceSummary::ConstPtr& msg) { queueSummary(msg, false); }
+void TeamLink::onBackfill(const mild_lcd::PlaceSummary::ConstPtr& msg) { queueSummary(msg, true); }
+
+void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool backfill) {
+  if (msg->station == settings_.team_station) return;  // our own, broadcast
+  const uint64_t bytes = bytesOf(*msg);
+  std::lock_guard<std::mutex> guard(mutex_);
+  Peer* p = peer(msg->station);
+  if (!p) {
+    ++refused_;
+    return;
+  }
+  ++p->summaries_in;
+  p->summary_bytes_in += bytes;
+  const size_t width = msg->descriptor_bytes;
+  const bool well_formed =
+      width == static_cast<size_t>(descriptor_bytes_) && bytes <= kMaxMessageBytes &&
+      msg->descriptors.size() % width == 0 && msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
+      msg->known_stations.size() == msg->known_counts.size() && msg->known_stations.size() <= kMaxPeers + 1 &&
+      !msg->robot.empty() && msg->robot.size() <= kMaxNameLength;
+  if (!well_formed) {
+    ++p->refused;
+    return;
+  }
+  if (msg->seq < p->taken) {
+    ++p->duplicates;
+    return;
+  }
+  // Ahead of a gap, at most this many wait; later ones are asked for again once the gap is filled.
+  const size_t room = 4 * static_cast<size_t>(settings_.team_backfill_batch) + 64;
+  if (p->waiting.size() >= room && p->waiting.count(msg->seq) == 0) return;
+  p->waiting[msg->seq] = Waiting{msg, backfill};
+  wake_.notify_one();
+}
+
+void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
+  if (msg->station == settings_.team_station) return;
+  std::lock_guard<std::mutex> guard(mutex_);
+  Peer* p = peer(msg->station);
+  if (!p || msg->peers.size() != msg->received.size() || msg->peers.size() != msg->loops_received.size()) {
+    if (p)
+      ++p->refused;
+    else
+      ++refused_;
+    return;
+  }
+  if (!connected(*p) && p->seen) p->reconnects++;
+  p->seen = true;
+  p->last_seen = Clock::now();
+  p->summaries = msg->summaries;
+  p->compatible = msg->descriptor_bytes == static_cast<uint32_t>(descriptor_bytes_);
+  for (size_t i = 0; i < msg->peers.size(); ++i) {
+    if (msg->peers[i] != settings_.team_station) continue;
+    p->acknowledged = std::max(p->acknowledged, msg->loops_received[i]);
+  }
+  while (!p->unacknowledged.empty() && p->unacknowledged.front()->seq < p->acknowledged) p->unacknowledged.pop_front();
+}
+
+void TeamLink::onRequest(const mild_lcd::TeamRequest::ConstPtr& msg) {
+  std::lock_guard<std::mutex> guard(mutex_);
+  if (requests_.size() >= kMaxInbox) {
+    ++refused_;
+    return;
+  }
+  requests_.push_back(msg);
+  wake_.notify_one();
+}
+
+void TeamLink::onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg) {
+  std::lock_guard<std::mutex> guard(mutex_);
+  if (replies_.size() >= kMaxInbox) {
+    ++refused_;
+    return;
+  }
+  replies_.push_back(msg);
+  wake_.notify_one();
+}
+
+void TeamLink::onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg) {
+  std::lock_guard<std::mutex> guard(mutex_);
+  if (loops_.size() >= kMaxInbox) {
+    ++refused_;
+    return;
+  }
+  loops_.push_back(msg);
+  wake_.notify_one();
+}
+
+// --- the link's thread ---
+
+void TeamLink::run() {
+  auto next_tick = Clock::now();
+  for (;;) {
+    std::deque<mild_lcd::TeamRequest::ConstPtr> requests;
+    std::deque<mild_lcd::TeamFeatures::ConstPtr> replies;
+    std::deque<mild_lcd::TeamLoop::ConstPtr> loops;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      wake_.wait_for(lock, std::chrono::milliseconds(100));
+      if (stopping_) return;
+      requests.swap(requests_);
+      replies.swap(replies_);
+      loops.swap(loops_);
+    }
+    try {
+      for (const auto& r : requests) serve(r);
+      for (const auto& r : replies) onFeatures(r);
+      for (const auto& l : loops) onLoop(l);
+      // A bounded batch, so that requests and replies are not starved by a long backlog.
+      for (int i = 0; i < 50 && takeNextSummary(); ++i) {
+      }
+      if (Clock::now() >= next_tick) {
+        tick();
+        next_tick = Clock::now() + std::chrono::seconds(1);
+      }
+    } catch (const std::exception& e) {
+      ROS_WARN_STREAM_THROTTLE(5.0, "team link: " << e.what());
+    }
+  }
+}
+
+bool TeamLink::takeNextSummary() {
+  std::string name;
+  Waiting next;
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    for (auto& [n, p] : peers_) {
+      if (p.waiting.empty() || p.waiting.begin()->first != p.taken || !p.compatible) continue;
+      if (p.pending_pulls >= static_cast<size_t>(settings_.team_max_pending_pulls)) continue;
+      name = n;
+      next = p.waiting.begin()->second;
+      p.waiting.erase(p.waiting.begin());
+      break;
+    }
+  }
+  if (name.empty()) return false;
+  take(name, next.summary, next.backfill);
+  return true;
+}
+
+void TeamLink::take(const std::string& name, const mild_lcd::PlaceSummary::ConstPtr& msg, bool late) {
+  Pending pending;
+  pending.peer = name;
+  pending.summary = msg;
+  pending.late = late;
+  bool asked = false;
+  {
+    const auto lock = shared_.lock();
+    // Taken whatever follows: a summary this station cannot use is counted, never asked again.
+    ledger_.took(name);
+    {
+      std::lock_guard<std::mutex> guard(mutex_);
+      if (Peer* p = peer(name)) p->taken = ledger_.received(name);
+    }
+    const mild::DescriptorList descriptors =
+        mild::descriptorsFromBytes(msg->descriptors.data(), msg->descriptors.size(), descriptor_bytes_);
+    if (descriptors.empty()) return;
+    const mild::PlaceSummary summary = coreSummary(*msg);
+    std::vector<mild::KeyframeIndex> eligible;
+    for (size_t r = 0; r < robot_names_.size(); ++r) {
+      eligible.push_back(
+          ledger_.eligiblePrefix(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()), summary));
+    }
+    try {
+      pending.answer = shared_.team->askRemote(name + "/" + msg->robot, descriptors, msg->features, eligible);
+    } catch (const mild::InvalidInput&) {
+      std::lock_guard<std::mutex> guard(mutex_);
+      if (Peer* p = peer(name)) ++p->refused;  // too many remote robots
+      return;
+    }
+    pending.replaced = shared_.replaced;
+    asked = pending.answer.needs_features;
+  }
+  // Only a candidate that could be accepted is worth the whole keyframe.
+  if (!asked) return;
+  std::lock_guard<std::mutex> guard(mutex_);
+  Peer* p = peer(name);
+  if (!p) return;
+  const uint64_t id = next_request_++;
+  ++p->pending_pulls;
+  Pending& stored = pending_.emplace(id, std::move(pending)).first->second;
+  sendPull(id, stored);
+}
+
+// Under mutex_.
+void TeamLink::sendPull(uint64_t request_id, Pending& pending) {
+  Peer* p = peer(pending.peer);
+  if (!p) return;
+  mild_lcd::TeamRequest request;
+  request.from = settings_.team_station;
+  request.request_id = request_id;
+  request.kind = mild_lcd::TeamRequest::FEATURES;
+  request.robot = pending.summary->robot;
+  request.id = pending.summary->id;
+  p->to_requests.publish(request);
+  p->bytes_out += bytesOf(request);
+  pending.asked = Clock::now();
+  ++pending.attempts;
+}
+
+void TeamLink::onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply) {
+  Pending pending;
+  mild::Features features;
+  bool verify = false;
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    auto it = pending_.find(reply->request_id);
+    if (it == pending_.end() || it->second.peer != reply->from) return;  // answered already, or not ours
+    Peer* p = peer(reply->from);
+    if (!p) return;
+    ++p->features_in;
+    p->feature_bytes_in += bytesOf(*reply);
+    if (reply->status == mild_lcd::TeamFeatures::BUSY) return;  // asked again after kResendAfter
+    if (reply->status == mild_lcd::TeamFeatures::OK) {
+      try {
+        features = featuresFromMsg(reply->keyframe);
+        verify = features.descriptors.size() <= static_cast<size_t>(settings_.max_keyframe_features);
+      } catch (const std::exception&) {
+        verify = false;
+      }
+      if (!verify) ++p->refused;
+    }
+    pending = std::move(it->second);
+    pending_.erase(it);
+    --p->pending_pulls;
+  }
+  // A keyframe its station no longer has, or features this station cannot use: judged unverified
+  // (nothing is accepted without verification).
+  judged(pending, verify ? &features : nullptr);
+}
+
+void TeamLink::judged(const Pending& pending, const mild::Features* features) {
+  mild_lcd::LoopClosure::Ptr msg;
+  size_t robot = 0;
+  {
+    const auto lock = shared_.lock();
+    if (shared_.replaced != pending.replaced) return;  // the candidates were keyframes of a replaced map
+    const mild::DetectionResult result = shared_.team->judgeRemote(pending.answer, features);
+    const auto accepted = std::find_if(result.candidates.begin(), result.candidates.end(),
+                                       [](const mild::LoopCandidate& c) { return c.accepted; });
+    if (accepted == result.candidates.end()) return;
+    robot = accepted->robot;
+    std_msgs::Header header;
+    header.stamp = pending.summary->stamp;
+    msg = boost::make_shared<mild_lcd::LoopClosure>(loopClosureToMsg(result, header, shared_.robot(robot).map().size(),
+                                                                     settings_.publish_correspondences, robot_names_));
+    msg->query_id = pending.summary->id;
+    msg->query_robot = pending.summary->robot;
+    msg->query_station = pending.peer;
+    msg->features = static_cast<int32_t>(pending.summary->features);
+    for (auto& c : msg->candidates) c.station = settings_.team_station;
+    auto loop = boost::make_shared<mild_lcd::TeamLoop>();
+    loop->decider = settings_.team_station;
+    loop->seq = ledger_.nextLoopFor(pending.peer);
+    loop->loop = *msg;
+    std::lock_guard<std::mutex> guard(mutex_);
+    if (Peer* p = peer(pending.peer)) {
+      ++p->loops_decided;
+      if (pending.late) ++p->loops_found_late;
+      p->unacknowledged.push_back(loop);
+      p->to_loops.publish(loop);
+      p->bytes_out += bytesOf(*loop);
+    }
+  }
+  publish_(robot, msg);
+}
+
+void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
+  const size_t robot = robotIndex(loop->loop.query_robot);
+  if (robot >= robot_names_.size() || loop->loop.query_station != settings_.team_station ||
+      bytesOf(*loop) > kMaxMessageBytes) {
+    std::lock_guard<std::mutex> guard(mutex_);
+    if (Peer* p = peer(loop->decider))
+      ++p->refused;
+    else
+      ++refused_;
+    return;
+  }
+  {
+    const auto lock = shared_.lock();
+    // In their order only: a later one is dropped and comes again (the decider resends until
+    // acknowledged), an earlier one was published already.
+    if (loop->seq != ledger_.loopsReceivedFrom(loop->decider)) return;
+    ledger_.tookLoop(loop->decider);
+  }
+  publish_(robot, boost::make_shared<const mild_lcd::LoopClosure>(loop->loop));
+}
+
+size_t TeamLink::robotIndex(const std::string& name) const {
+  return static_cast<size_t>(std::find(robot_names_.begin(), robot_names_.end(), name) - robot_names_.begin());
+}
+
+void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    Peer* p = peer(request->from);
+    if (!p) {
+      ++refused_;
+      return;
+    }
+    const auto now = Clock::now();
+    const double rate = settings_.team_max_requests_per_second;
+    p->tokens = std::min(2.0 * rate, p->tokens + rate * std::chrono::duration<double>(now - p->refilled).count());
+    p->refilled = now;
+    if (p->tokens < 1.0) {
+      ++p->refused;
+      if (request->kind == mild_lcd::TeamRequest::FEATURES) {
+        mild_lcd::TeamFeatures busy;
+        busy.from = settings_.team_station;
+        busy.request_id = request->request_id;
+        busy.status = mild_lcd::TeamFeatures::BUSY;
+        busy.reason = "more than ~team/max_requests_per_second requests";
+        p->to_features.publish(busy);
+      }
+      return;
+    }
+    p->tokens -= 1.0;
+  }
+  if (request->kind == mild_lcd::TeamRequest::SUMMARIES) {
+    std::vector<mild_lcd::PlaceSummary::ConstPtr> batch;
+    {
+      const auto lock = shared_.lock();
+      const uint64_t end = std::min<uint64_t>(
+          ledger_.ownCount(), request->first + std::min<uint64_t>(request->count, settings_.team_backfill_batch));
+      for (uint64_t seq = request->first; seq < end; ++seq) batch.push_back(summaryOf(seq));
+    }
+    std::lock_guard<std::mutex> guard(mutex_);
+    Peer* p = peer(request->from);
+    for (const auto& s : batch) {
+      p->to_summaries.publish(s);
+      p->bytes_out += bytesOf(*s);
+    }
+    return;
+  }
+  auto reply = boost::make_shared<mild_lcd::TeamFeatures>();
+  reply->from = settings_.team_station;
+  reply->request_id = request->request_id;
+  if (request->kind != mild_lcd::TeamRequest::FEATURES) {
+    reply->status = mild_lcd::TeamFeatures::MALFORMED;
+    reply->reason = "unknown request kind " + std::to_string(request->kind);
+  } else if (const size_t robot = robotIndex(request->robot); robot >= robot_names_.size()) {
+    reply->status = mild_lcd::TeamFeatures::UNKNOWN;
+    reply->reason = "no robot '" + request->robot.substr(0, kMaxNameLength) + "' at this station";
+  } else {
+    const auto lock = shared_.lock();
+    const mild::KeyframeMap& map = shared_.robot(robot).map();
+    if (const auto index = map.find(request->id)) {
+      reply->keyframe = featuresToMsg(map.features(*index), descriptor_bytes_);
+      reply->keyframe.id = request->id;
+      reply->keyframe.has_id = true;
+      reply->status = mild_lcd::TeamFeatures::OK;
+    } else {
+      reply->status = mild_lcd::TeamFeatures::UNKNOWN;
+      reply->reason = "robot '" + request->robot + "' has no keyframe " + std::to_string(request->id);
+    }
+  }
+  std::lock_guard<std::mutex> guard(mutex_);
+  Peer* p = peer(request->from);
+  if (reply->status != mild_lcd::TeamFeatures::OK) ++p->refused;
+  p->to_features.publish(reply);
+  p->bytes_out += bytesOf(*reply);
+}
+
+void TeamLink::tick() {
+  auto status = boost::make_shared<mild_lcd::TeamStatus>();
+  const auto lock = shared_.lock();
+  std::lock_guard<std::mutex> guard(mutex_);
+  status->station = settings_.team_station;
+  status->summaries = ledger_.ownCount();
+  status->descriptor_bytes = static_cast<uint32_t>(descriptor_bytes_);
+  const auto now = Clock::now();
+  for (auto& [name, p] : peers_) {
+    status->peers.push_back(name);
+    status->received.push_back(ledger_.received(name));
+    status->loops_received.push_back(ledger_.loopsReceivedFrom(name));
+    status->summaries_in += p.summaries_in;
+    status->summary_bytes_in += p.summary_bytes_in;
+    status->features_in += p.features_in;
+    status->feature_bytes_in += p.feature_bytes_in;
+    status->loops_decided += p.loops_decided;
+    status->loops_found_late += p.loops_found_late;
+    status->refused += p.refused;
+    if (!connected(p) || !p.compatible) continue;
+    // Behind, and what is next is not waiting here: ask for it (again, if unanswered).
+    const bool gap = p.summaries > p.taken && (p.waiting.empty() || p.waiting.begin()->first != p.taken);
+    if (gap && now - p.backfill_asked >= kResendAfter) {
+      mild_lcd::TeamRequest request;
+      request.from = settings_.team_station;
+      request.request_id = next_request_++;
+      request.kind = mild_lcd::TeamRequest::SUMMARIES;
+      request.first = p.taken;
+      request.count = static_cast<uint32_t>(settings_.team_backfill_batch);
+      p.to_requests.publish(request);
+      p.bytes_out += bytesOf(request);
+      p.backfill_asked = now;
+    }
+    // Loops not acknowledged are sent again, in order.
+    for (const auto& loop : p.unacknowledged) {
+      p.to_loops.publish(loop);
+      p.bytes_out += bytesOf(*loop);
+    }
+  }
+  status->refused += refused_;
+  for (auto& [id, pending] : pending_) {
+    Peer* p = peer(pending.peer);
+    if (p && connected(*p) && now - pending.asked >= kResendAfter) sendPull(id, pending);
+  }
+  status_pub_.publish(status);
+}
+
+void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
+  uint64_t backlog_total = 0;
+  size_t disconnected = 0;
+  std::lock_guard<std::mutex> guard(mutex_);
+  for (const auto& [name, p] : peers_) {
+    const bool up = connected(p);
+    if (!up) ++disconnected;
+    const uint64_t backlog = p.summaries > p.taken ? p.summaries - p.taken : 0;
+    backlog_total += backlog;
+    stat.add(name + ": connected", up ? "yes" : "no");
+    stat.add(name + ": compatible", p.compatible ? "yes" : "no (another descriptor width)");
+    stat.add(name + ": backlog (summaries not yet taken)", backlog);
+    stat.add(name + ": keyframes waiting for features", p.pending_pulls);
+    stat.add(name + ": bytes in (summaries)", p.summary_bytes_in);
+    stat.add(name + ": bytes in (features pulled)", p.feature_bytes_in);
+    stat.add(name + ": bytes out", p.bytes_out);
+    stat.add(name + ": loops decided", p.loops_decided);
+    stat.add(name + ": loops found late after a reconnect", p.loops_found_late);
+    stat.add(name + ": loops not yet acknowledged", p.unacknowledged.size());
+    stat.add(name + ": refused", p.refused);
+    stat.add(name + ": reconnects", p.reconnects);
+  }
+  stat.add("summaries sent", summaries_out_);
+  stat.add("summary bytes sent", summary_bytes_out_);
+  stat.add("refused from no peer", refused_);
+  if (disconnected > 0) {
+    stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu of %zu peers disconnected, %lu summaries behind",
+                  disconnected, peers_.size(), static_cast<unsigned long>(backlog_total));
+  } else {
+    stat.summaryf(diagnostic_msgs::DiagnosticStatus::OK, "%zu peers connected, %lu summaries behind", peers_.size(),
+                  static_cast<unsigned long>(backlog_total));
+  }
+}
+
+}  // namespace mild_lcd
