@@ -236,8 +236,12 @@ class LoopClosureNodelet : public nodelet::Nodelet {
     const uint32_t robot = k.result.query_robot;
     // A shared pointer, never changed after publishing: a subscriber in the same manager (the
     // pose-graph nodelet) receives it without serialisation.
-    const mild_lcd::LoopClosure::ConstPtr msg = boost::make_shared<const mild_lcd::LoopClosure>(
+    const auto msg = boost::make_shared<mild_lcd::LoopClosure>(
         loopClosureToMsg(k.result, k.header, k.database_size, settings_.publish_correspondences, team_names_));
+    if (!settings_.team_station.empty()) {  // a team across hosts: every side says whose it is
+      msg->query_station = settings_.team_station;
+      for (auto& c : msg->candidates) c.station = settings_.team_station;
+    }
     robots_.at(robot)->loop_pub.publish(msg);
     if (all_pub_) all_pub_.publish(msg);
     if (!k.image.image.empty()) debug_cache_->remember(k.result.query_id, k.image.image, k.image.format, robot);

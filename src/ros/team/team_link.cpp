@@ -425,19 +425,19 @@ void TeamLink::onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply) {
 
 void TeamLink::judged(const Pending& pending, const mild::Features* features) {
   mild_lcd::LoopClosure::Ptr msg;
-  size_t robot = 0;
+  std::vector<size_t> robots;  // whose maps hold an accepted candidate: the loop is theirs too
   {
     const auto lock = shared_.lock();
     if (shared_.replaced != pending.replaced) return;  // the candidates were keyframes of a replaced map
     const mild::DetectionResult result = shared_.team->judgeRemote(pending.answer, features);
-    const auto accepted = std::find_if(result.candidates.begin(), result.candidates.end(),
-                                       [](const mild::LoopCandidate& c) { return c.accepted; });
-    if (accepted == result.candidates.end()) return;
-    robot = accepted->robot;
+    for (const mild::LoopCandidate& c : result.candidates) {
+      if (c.accepted && std::find(robots.begin(), robots.end(), c.robot) == robots.end()) robots.push_back(c.robot);
+    }
+    if (robots.empty()) return;
     std_msgs::Header header;
     header.stamp = pending.summary->stamp;
-    msg = boost::make_shared<mild_lcd::LoopClosure>(loopClosureToMsg(result, header, shared_.robot(robot).map().size(),
-                                                                     settings_.publish_correspondences, robot_names_));
+    msg = boost::make_shared<mild_lcd::LoopClosure>(loopClosureToMsg(
+        result, header, shared_.robot(robots.front()).map().size(), settings_.publish_correspondences, robot_names_));
     msg->query_id = pending.summary->id;
     msg->query_robot = pending.summary->robot;
     msg->query_station = pending.peer;
@@ -456,7 +456,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
       p->bytes_out += bytesOf(*loop);
     }
   }
-  publish_(robot, msg);
+  for (size_t robot : robots) publish_(robot, msg);
 }
 
 void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {

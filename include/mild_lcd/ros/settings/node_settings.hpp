@@ -9,6 +9,7 @@
 
 #include "mild_lcd/params/parameter_source.hpp"
 #include "mild_lcd/params/parameter_spec.hpp"
+#include "mild_lcd/team/place_summary.hpp"
 
 namespace mild_lcd {
 
@@ -37,8 +38,8 @@ struct NodeSettings {
   std::string robots;               // names of the robots served, space- or comma-separated; "" = one
   // A team across hosts (ros/team/team_link.hpp): this station's name ("" = none) and its bounds.
   std::string team_station;
-  int team_summary_bytes = 7000;          // descriptor bytes per keyframe summary pushed to the peers
-  int team_backfill_batch = 20;           // summaries per request when filling a gap
+  int team_summary_bytes = static_cast<int>(mild::kDefaultSummaryBytes);  // descriptor bytes per summary
+  int team_backfill_batch = 20;                                           // summaries per request when filling a gap
   double team_peer_timeout = 5.0;         // seconds without a heartbeat: the peer is disconnected
   int team_max_requests_per_second = 20;  // from one peer; more are refused (busy) and counted
   int team_max_pending_pulls = 32;        // per peer: keyframes waiting for their features

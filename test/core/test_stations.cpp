@@ -1,0 +1,334 @@
+// A team across hosts in the core (team/station_ledger.hpp, team/place_summary.hpp,
+// RobotTeam::askRemote / judgeRemote): which station decides a pair of keyframes, the ledger saved
+// and read back, and two stations finding the loops between their robots from summaries as one
+// node serving both robots does.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <iostream>
+#include <map>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/detector/feature_front_end.hpp"
+#include "mild_lcd/detector/robot_team.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/team/place_summary.hpp"
+#include "mild_lcd/team/station_ledger.hpp"
+#include "test_images.hpp"
+
+namespace mild {
+namespace {
+
+// --- who decides ---
+
+// Stations storing keyframes and taking each other's summaries in a random order, links going
+// down and up. A station takes a peer's summaries in their order only, as the link does. Each
+// time one takes a summary, the keyframes of its own map that StationLedger::eligiblePrefix
+// returns are the pairs it decides.
+struct SimulatedStation {
+  explicit SimulatedStation(const std::string& name) : ledger(name, 1) {}
+  StationLedger ledger;
+  std::vector<PlaceSummary> summaries;  // its own, by number
+};
+
+PlaceSummary summaryOf(const SimulatedStation& s, uint64_t seq) {
+  PlaceSummary summary;
+  summary.station = s.ledger.station();
+  summary.seq = seq;
+  summary.known = s.ledger.own(seq).known;
+  return summary;
+}
+
+TEST(StationLedger, EveryPairOfKeyframesOfTwoStationsIsDecidedExactlyOnce) {
+  for (unsigned seed = 1; seed <= 20; ++seed) {
+    std::mt19937 random(seed);
+    std::vector<SimulatedStation> stations;
+    for (const char* name : {"charlie", "alpha", "bravo"}) stations.emplace_back(name);
+    const size_t n = stations.size();
+    std::vector<std::vector<bool>> link_up(n, std::vector<bool>(n, true));
+    // decided[(station a, seq a, station b, seq b)] with a < b: how many times.
+    std::map<std::tuple<size_t, uint64_t, size_t, uint64_t>, int> decided;
+    for (int step = 0; step < 600; ++step) {
+      const size_t s = random() % n;
+      const int action = static_cast<int>(random() % 10);
+      if (action < 3) {
+        stations[s].ledger.recordOwn(0, stations[s].ledger.ownCount(),
+                                     static_cast<KeyframeIndex>(stations[s].ledger.ownCount()));
+      } else if (action == 3) {
+        const size_t t = random() % n;
+        if (t != s) link_up[s][t] = link_up[t][s] = !link_up[s][t];  // an outage starts or ends
+      } else {
+        const size_t from = random() % n;
+        if (from == s || !link_up[s][from]) continue;
+        SimulatedStation& me = stations[s];
+        const SimulatedStation& peer = stations[from];
+        const std::string& peer_name = peer.ledger.station();
+        const uint64_t next = me.ledger.received(peer_name);
+        if (next >= peer.ledger.ownCount()) continue;
+        const PlaceSummary summary = summaryOf(peer, next);
+        const KeyframeIndex mine = static_cast<KeyframeIndex>(me.ledger.ownCount());
+        const KeyframeIndex prefix = me.ledger.eligiblePrefix(0, mine, summary);
+        for (KeyframeIndex j = 0; j < prefix; ++j) {
+          const auto key =
+              s < from ? std::make_tuple(s, uint64_t{j}, from, next) : std::make_tuple(from, next, s, uint64_t{j});
+          ++decided[key];
+        }
+        me.ledger.took(peer_name);
+      }
+    }
+    // Every link up, every summary taken: then every pair has been looked at.
+    bool progress = true;
+    while (progress) {
+      progress = false;
+      for (size_t s = 0; s < n; ++s) {
+        for (size_t from = 0; from < n; ++from) {
+          if (from == s) continue;
+          SimulatedStation& me = stations[s];
+          const std::string& peer_name = stations[from].ledger.station();
+          const uint64_t next = me.ledger.received(peer_name);
+          if (next >= stations[from].ledger.ownCount()) continue;
+          const PlaceSummary summary = summaryOf(stations[from], next);
+          const KeyframeIndex prefix =
+              me.ledger.eligiblePrefix(0, static_cast<KeyframeIndex>(me.ledger.ownCount()), summary);
+          for (KeyframeIndex j = 0; j < prefix; ++j) {
+            const auto key =
+                s < from ? std::make_tuple(s, uint64_t{j}, from, next) : std::make_tuple(from, next, s, uint64_t{j});
+            ++decided[key];
+          }
+          me.ledger.took(peer_name);
+          progress = true;
+        }
+      }
+    }
+    size_t pairs = 0;
+    for (size_t a = 0; a < n; ++a) {
+      for (size_t b = a + 1; b < n; ++b) {
+        for (uint64_t i = 0; i < stations[a].ledger.ownCount(); ++i) {
+          for (uint64_t j = 0; j < stations[b].ledger.ownCount(); ++j) {
+            const auto it = decided.find({a, i, b, j});
+            ASSERT_TRUE(it != decided.end() && it->second == 1)
+                << "seed " << seed << ": keyframe " << i << " of " << stations[a].ledger.station() << " and " << j
+                << " of " << stations[b].ledger.station() << " decided " << (it == decided.end() ? 0 : it->second)
+                << " times";
+            ++pairs;
+          }
+        }
+      }
+    }
+    EXPECT_GT(pairs, 1000u);
+  }
+}
+
+TEST(StationLedger, KeyframesStoredBeforeTheLedgerOrAMapReplacementAreEveryonesToAsk) {
+  StationLedger ledger("alpha", 2);
+  ledger.recordOwn(1, 7, 5);  // robot 1's map held 5 keyframes (a loaded map) before this one
+  PlaceSummary s;
+  s.station = "bravo";
+  s.seq = 0;
+  s.known = {{"alpha", 1}};  // bravo held our summary 0 when it stored this
+  EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 6u);
+  s.known = {};                                   // it did not: the pair is concurrent,
+  EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 6u);  // alpha sorts first and decides
+  s.station = "aaron";                            // a station sorting before alpha decides it
+  EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 5u);
+  ledger.mapReplaced(1);
+  EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 6u);
+  EXPECT_EQ(ledger.eligiblePrefix(0, 3, s), 3u);  // robot 0 numbered nothing
+}
+
+TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) {
+  StationLedger ledger("alpha", 2);
+  ledger.took("bravo");
+  ledger.took("bravo");
+  ledger.recordOwn(0, 11, 0);
+  ledger.recordOwn(1, 12, 0);
+  ledger.nextLoopFor("bravo");
+  ledger.tookLoop("charlie");
+  const std::string text = ledger.toText();
+
+  StationLedger again("alpha", 2);
+  again.fromText(text);
+  EXPECT_EQ(again.toText(), text);
+  EXPECT_EQ(again.ownCount(), 2u);
+  EXPECT_EQ(again.received("bravo"), 2u);
+  EXPECT_EQ(again.loopsSentTo("bravo"), 1u);
+  EXPECT_EQ(again.loopsReceivedFrom("charlie"), 1u);
+  EXPECT_EQ(again.own(1).known, (std::vector<std::pair<std::string, uint64_t>>{{"bravo", 2}}));
+
+  StationLedger other("bravo", 2);
+  EXPECT_THROW(other.fromText(text), InvalidInput);
+  StationLedger fewer("alpha", 1);
+  EXPECT_THROW(fewer.fromText(text), InvalidInput);
+  for (const std::string& bad :
+       std::vector<std::string>{"", "{", "[]", "{\"format\": 3}", text.substr(0, text.size() / 2)}) {
+    StationLedger kept("alpha", 2);
+    kept.took("zulu");
+    const std::string before = kept.toText();
+    EXPECT_THROW(kept.fromText(bad), InvalidInput) << bad;
+    EXPECT_EQ(kept.toText(), before);
+  }
+  EXPECT_THROW(StationLedger("Alpha", 1), InvalidInput);
+  EXPECT_THROW(StationLedger("", 1), InvalidInput);
+  EXPECT_THROW(StationLedger("alpha/x", 1), InvalidInput);
+  EXPECT_THROW(StationLedger("alpha", 0), InvalidInput);
+}
+
+// --- summaries ---
+
+TEST(PlaceSummary, CarriesTheStrongestDescriptorsInTheKeyframesOrder) {
+  Features f;
+  for (int i = 0; i < 6; ++i) {
+    cv::KeyPoint k(static_cast<float>(i), 0.f, 7.f);
+    k.response = static_cast<float>((i * 7) % 6);  // 0 1 2 3 4 5 permuted: 0, 1, 2, 3, 4, 5 -> 0 1 2 3 4 5
+    f.keypoints.push_back(k);
+    Descriptor d;
+    d.words[0] = static_cast<uint64_t>(i);
+    f.descriptors.push_back(d);
+  }
+  f.keypoints[0].response = 10.f;
+  f.keypoints[3].response = 9.f;
+  f.keypoints[5].response = 8.f;
+  const DescriptorList strongest = strongestDescriptors(f, 3);
+  ASSERT_EQ(strongest.size(), 3u);
+  EXPECT_EQ(strongest[0].words[0], 0u);
+  EXPECT_EQ(strongest[1].words[0], 3u);
+  EXPECT_EQ(strongest[2].words[0], 5u);
+  EXPECT_EQ(strongestDescriptors(f, 100).size(), 6u);
+  EXPECT_EQ(descriptorsWithin(kDefaultSummaryBytes, 32), 243u);
+  EXPECT_EQ(descriptorsWithin(kDefaultSummaryBytes, 64), 121u);
+  EXPECT_EQ(descriptorsWithin(10, 32), 1u);
+}
+
+// --- two stations on the sample ---
+
+constexpr int kFrames = 300;
+constexpr int kHalf = 150;
+
+GroundTruth acrossHalves() {
+  const GroundTruth all = loadGroundTruth(test::kSampleDir + "/gt_loops.txt", kFrames);
+  GroundTruth truth;
+  for (const auto& p : all.right) {
+    if (p.first >= kHalf && p.second < kHalf) {
+      truth.right.insert(p);
+      truth.loop_queries.insert(p.first);
+    }
+  }
+  for (const auto& p : all.dont_care) {
+    if (p.first >= kHalf && p.second < kHalf) truth.dont_care.insert(p);
+  }
+  return truth;
+}
+
+struct Decisions {
+  std::set<int> found;  // queries (second half) with an accepted true loop into the first half
+  size_t wrong = 0;     // accepted loops that are not true
+  size_t pulls = 0;     // keyframes whose features were fetched
+};
+
+// Pairs of frames closer than this are neighbours on the path, not loops (evaluate()'s min_gap):
+// the end of the first half and the start of the second are one place seen twice in a row.
+constexpr int kMinGap = 40;
+
+// The accepted candidates of a keyframe of either half into the other half's map, judged by the
+// ground truth (which pairs the later frame with the earlier one).
+void judgeAccepted(const GroundTruth& truth, int query, const std::vector<LoopCandidate>& candidates, Decisions& d) {
+  for (const LoopCandidate& c : candidates) {
+    const int other = static_cast<int>(c.id);
+    if (!c.accepted || (query < kHalf) == (other < kHalf) || std::abs(query - other) < kMinGap) continue;
+    const std::pair<int, int> pair{std::max(query, other), std::min(query, other)};
+    if (truth.right.count(pair)) {
+      if (query >= kHalf) d.found.insert(query);
+    } else if (!truth.dont_care.count(pair)) {
+      ++d.wrong;
+    }
+  }
+}
+
+// Station alpha's robot maps frames 0..149 while bravo's maps 150..299 (whose end comes back to
+// alpha's start), one keyframe each in turn, each station taking the other's summary right after.
+// Against one node serving both robots: every loop it accepts between them is accepted, and none it
+// would call wrong. Also measures what smaller summaries keep (docs/multi_robot.md).
+TEST(Stations, TwoStationsFindTheLoopsBetweenTheirRobotsAsOneNodeServingBothDoes) {
+  const GroundTruth truth = acrossHalves();
+  const DetectorParams params;
+  const FeatureFrontEnd front_end(params.features);
+  std::vector<Features> features;
+  for (int i = 0; i < kFrames; ++i) {
+    features.push_back(
+        front_end.extract(Observation::ofImage(test::sampleFrames()[i], PixelFormat::kGray, 0.1 * i)).features);
+  }
+
+  Decisions single;
+  {
+    RobotTeam team(params, {"a", "b"});
+    for (int k = 0; k < kHalf; ++k) {
+      judgeAccepted(truth, k, team.process(Observation::ofFeatures(features[k], 0.1 * k, k, 0)).candidates, single);
+      const int j = kHalf + k;
+      const DetectionResult r = team.process(Observation::ofFeatures(features[j], 0.1 * j, j, 1));
+      judgeAccepted(truth, j, r.candidates, single);
+    }
+  }
+  ASSERT_GT(single.found.size(), 20u);
+  EXPECT_EQ(single.wrong, 0u);
+
+  for (const size_t summary_size : {size_t{50}, size_t{100}, size_t{243}, size_t{10000}}) {
+    RobotTeam alpha_team(params, {"robot1"}), bravo_team(params, {"robot2"});
+    StationLedger alpha("alpha", 1), bravo("bravo", 1);
+    Decisions distributed;
+    for (int k = 0; k < kHalf; ++k) {
+      const int j = kHalf + k;
+      const DetectionResult ra = alpha_team.process(Observation::ofFeatures(features[k], 0.1 * k, k, 0));
+      PlaceSummary sa;
+      sa.station = "alpha";
+      sa.seq = alpha.recordOwn(0, ra.query_id, ra.query_index);
+      sa.known = alpha.own(sa.seq).known;
+      const DetectionResult rb = bravo_team.process(Observation::ofFeatures(features[j], 0.1 * j, j, 0));
+      PlaceSummary sb;
+      sb.station = "bravo";
+      sb.seq = bravo.recordOwn(0, rb.query_id, rb.query_index);
+      sb.known = bravo.own(sb.seq).known;
+      // alpha takes bravo's keyframe j: the loops of the second half into the first.
+      RobotTeam::RemoteAnswer answer = alpha_team.askRemote(
+          "bravo/robot2", strongestDescriptors(features[j], summary_size), features[j].descriptors.size(),
+          {alpha.eligiblePrefix(0, static_cast<KeyframeIndex>(alpha_team.robot(0).map().size()), sb)});
+      alpha.took("bravo");
+      distributed.pulls += answer.needs_features;
+      const DetectionResult judged =
+          alpha_team.judgeRemote(std::move(answer), answer.needs_features ? &features[j] : nullptr);
+      judgeAccepted(truth, j, judged.candidates, distributed);
+      // bravo takes alpha's keyframe k: the loops of the first half into the second (few).
+      RobotTeam::RemoteAnswer back = bravo_team.askRemote(
+          "alpha/robot1", strongestDescriptors(features[k], summary_size), features[k].descriptors.size(),
+          {bravo.eligiblePrefix(0, static_cast<KeyframeIndex>(bravo_team.robot(0).map().size()), sa)});
+      bravo.took("alpha");
+      distributed.pulls += back.needs_features;
+      const DetectionResult judged_back =
+          bravo_team.judgeRemote(std::move(back), back.needs_features ? &features[k] : nullptr);
+      judgeAccepted(truth, k, judged_back.candidates, distributed);
+    }
+    size_t kept = 0;
+    for (int q : single.found) kept += distributed.found.count(q);
+    const double share = static_cast<double>(kept) / static_cast<double>(single.found.size());
+    std::cout << "summary of " << summary_size << " descriptors: " << distributed.found.size()
+              << " loop queries found (" << kept << " of the single node's " << single.found.size() << ", " << share
+              << "), wrong " << distributed.wrong << ", features pulled for " << distributed.pulls << " of " << kFrames
+              << " keyframes\n";
+    RecordProperty("kept_share_" + std::to_string(summary_size), std::to_string(share));
+    if (summary_size == descriptorsWithin(kDefaultSummaryBytes, params.features.descriptorBytes())) {
+      EXPECT_GE(share, 0.95);
+      EXPECT_EQ(distributed.wrong, 0u);
+      EXPECT_LT(distributed.pulls, static_cast<size_t>(kFrames) / 2);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace mild
