@@ -139,6 +139,10 @@ TEST(StationLedger, KeyframesStoredBeforeTheLedgerOrAMapReplacementAreEveryonesT
   EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 6u);  // alpha sorts first and decides
   s.station = "aaron";                            // a station sorting before alpha decides it
   EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 5u);
+  ledger.forgetBeyond(1, 5);  // a map saved before keyframe 5 was stored: it is not numbered any more
+  EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 6u);
+  ledger.recordOwn(1, 8, 5);
+  EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 5u);
   ledger.mapReplaced(1);
   EXPECT_EQ(ledger.eligiblePrefix(1, 6, s), 6u);
   EXPECT_EQ(ledger.eligiblePrefix(0, 3, s), 3u);  // robot 0 numbered nothing

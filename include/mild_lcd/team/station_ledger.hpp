@@ -63,6 +63,11 @@ class StationLedger {
   // They are all "before the ledger" from now on; the numbers stay taken.
   void mapReplaced(size_t robot);
 
+  // After a restart from maps saved before the ledger (an autosave, then a crash): robot's
+  // keyframes numbered at map indices >= map_size are not in its map; they are forgotten (their
+  // numbers stay taken: peers may hold their summaries, which then find nothing here).
+  void forgetBeyond(size_t robot, KeyframeIndex map_size);
+
   // Loops this station decided whose query is a peer's keyframe, numbered per peer: the next
   // number, and what the peer acknowledged (it holds loops [0, acknowledged)).
   uint64_t nextLoopFor(const std::string& peer);

@@ -85,6 +85,14 @@ void StationLedger::mapReplaced(size_t robot) {
   numbered_[robot].clear();
 }
 
+void StationLedger::forgetBeyond(size_t robot, KeyframeIndex map_size) {
+  if (robot >= robots_) throw InvalidInput("no robot " + std::to_string(robot));
+  std::vector<Numbered>& numbered = numbered_[robot];
+  numbered.erase(
+      std::partition_point(numbered.begin(), numbered.end(), [&](const Numbered& n) { return n.map_index < map_size; }),
+      numbered.end());
+}
+
 uint64_t StationLedger::nextLoopFor(const std::string& peer) { return loops_sent_[peer]++; }
 
 uint64_t StationLedger::loopsSentTo(const std::string& peer) const {

@@ -78,6 +78,9 @@ void TeamLink::start() {
     if (!in) throw mild::IoError("cannot read the station ledger " + ledger_path_);
     const auto lock = shared_.lock();
     ledger_.fromText(text.str());
+    for (size_t r = 0; r < robot_names_.size(); ++r) {
+      ledger_.forgetBeyond(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()));
+    }
   }
   {
     const auto lock = shared_.lock();
@@ -100,6 +103,22 @@ void TeamLink::start() {
 }
 
 void TeamLink::stop() {
+  // Keyframes of peers waiting for their features were taken already: their loops would be lost
+  // with a restart. Their answers are waited for a moment (a pull takes milliseconds on a live link).
+  const auto deadline = Clock::now() + std::chrono::seconds(3);
+  for (;;) {
+    {
+      std::lock_guard<std::mutex> guard(mutex_);
+      if (pending_.empty() || stopping_ || !thread_.joinable()) break;
+      if (Clock::now() >= deadline) {
+        ROS_WARN_STREAM("team link: stopping with " << pending_.size()
+                                                    << " peer keyframes still waiting for their features: their loops, "
+                                                       "if any, are not found");
+        break;
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
   summaries_sub_.shutdown();
   backfill_sub_.shutdown();
   status_sub_.shutdown();
