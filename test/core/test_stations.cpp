@@ -185,6 +185,36 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   EXPECT_THROW(StationLedger("alpha", 0), InvalidInput);
 }
 
+// A remote robot's filters into this team's maps are the team's to keep consistent: a map
+// replaced (RobotTeam::mapChanged) or all reset starts them over, as it does the robots' own pairs.
+TEST(RobotTeamRemote, AMapChangedStartsTheRemoteRobotsFiltersOver) {
+  const DetectorParams params;
+  const FeatureFrontEnd front_end(params.features);
+  std::vector<Features> features;
+  for (int i = 0; i < 30; ++i) {
+    features.push_back(
+        front_end.extract(Observation::ofImage(test::sampleFrames()[i], PixelFormat::kGray, 0.1 * i)).features);
+  }
+  const auto answers = [&](bool change_between) {
+    RobotTeam team(params, {"a"});
+    for (int i = 0; i < 20; ++i) team.process(Observation::ofFeatures(features[i], 0.1 * i, i, 0));
+    std::vector<double> beliefs;
+    for (int i = 20; i < 30; ++i) {
+      if (change_between && i == 25) team.mapChanged(0);
+      const RobotTeam::RemoteAnswer a = team.askRemote("far/r", features[i - 15].descriptors, 500, {kAllKeyframes});
+      beliefs.push_back(a.candidates.empty() ? 0.0 : a.candidates.front().filter_probability);
+    }
+    EXPECT_EQ(team.remoteRobots(), 1u);
+    return beliefs;
+  };
+  const std::vector<double> kept = answers(false), restarted = answers(true);
+  // Before the change the same; right after it the filter starts from "no loop" again.
+  for (int i = 0; i < 5; ++i) EXPECT_DOUBLE_EQ(kept[i], restarted[i]);
+  EXPECT_NE(kept[5], restarted[5]);
+  RobotTeam team(params, {"a", "b"});
+  EXPECT_THROW(team.askRemote("far/r", features[0].descriptors, 500, {kAllKeyframes}), InvalidInput);
+}
+
 // --- summaries ---
 
 TEST(PlaceSummary, CarriesTheStrongestDescriptorsInTheKeyframesOrder) {

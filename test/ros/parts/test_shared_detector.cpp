@@ -34,5 +34,29 @@ TEST(SharedDetectorRetune, NeverWaitsForTheDetectorAndHoldsBeforeItIsNextUsed) {
   EXPECT_EQ(shared.team->retunes(), 2u);
 }
 
+// Maps change other than by a keyframe in one place (SharedDetector::mapReplaced, resetMaps): a
+// load, a merge and the reset service all go through it, and whoever listens (the team link, which
+// renumbers) hears of every robot whose map was replaced; `replaced` tells a pull in flight that
+// its candidates were keyframes of an old map.
+TEST(SharedDetectorMaps, EveryReplacementIsToldOnceThroughOnePlace) {
+  SharedDetector shared;
+  shared.setTeam(std::make_unique<mild::RobotTeam>(mild::DetectorParams{}, std::vector<std::string>{"a", "b", "c"}));
+  std::vector<size_t> told;
+  shared.on_map_replaced = [&](size_t robot) { told.push_back(robot); };
+  const auto lock = shared.lock();
+  shared.mapReplaced(1);
+  EXPECT_EQ(told, (std::vector<size_t>{1}));
+  EXPECT_EQ(shared.replaced, 1u);
+  EXPECT_EQ(shared.changes, 1u);
+  shared.mapReplaced(2, false);  // what a file holds: nothing to save
+  EXPECT_EQ(shared.replaced, 2u);
+  EXPECT_EQ(shared.changes, 1u);
+  told.clear();
+  shared.resetMaps();
+  EXPECT_EQ(told, (std::vector<size_t>{0, 1, 2}));
+  EXPECT_EQ(shared.replaced, 3u);
+  EXPECT_EQ(shared.changes, 2u);
+}
+
 }  // namespace
 }  // namespace mild_lcd
