@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 
 #include <ros/serialization.h>
@@ -24,6 +25,8 @@ constexpr size_t kMaxNameLength = 64;
 // Asked again when unanswered this long (a message published before the peer's subscriber
 // connected is lost; the link may have dropped it).
 constexpr std::chrono::seconds kResendAfter{2};
+// Loops resent to one peer per heartbeat period, at most (after a long outage many wait).
+constexpr size_t kMaxResendsPerTick = 50;
 
 template <class M>
 uint64_t bytesOf(const M& msg) {
@@ -240,8 +243,12 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
     return;
   }
   // Ahead of a gap, at most this many wait; later ones are asked for again once the gap is filled.
+  // The earliest are kept: they are what the gap's filling lets through next.
   const size_t room = 4 * static_cast<size_t>(settings_.team_backfill_batch) + 64;
-  if (p->waiting.size() >= room && p->waiting.count(msg->seq) == 0) return;
+  if (p->waiting.size() >= room && p->waiting.count(msg->seq) == 0) {
+    if (msg->seq > p->waiting.rbegin()->first) return;
+    p->waiting.erase(std::prev(p->waiting.end()));
+  }
   p->waiting[msg->seq] = Waiting{msg, backfill};
   wake_.notify_one();
 }
@@ -266,7 +273,9 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
     if (msg->peers[i] != settings_.team_station) continue;
     p->acknowledged = std::max(p->acknowledged, msg->loops_received[i]);
   }
-  while (!p->unacknowledged.empty() && p->unacknowledged.front()->seq < p->acknowledged) p->unacknowledged.pop_front();
+  while (!p->unacknowledged.empty() && p->unacknowledged.front().loop->seq < p->acknowledged) {
+    p->unacknowledged.pop_front();
+  }
 }
 
 void TeamLink::onRequest(const mild_lcd::TeamRequest::ConstPtr& msg) {
@@ -338,6 +347,8 @@ bool TeamLink::takeNextSummary() {
   {
     std::lock_guard<std::mutex> guard(mutex_);
     for (auto& [n, p] : peers_) {
+      // A copy of one taken meanwhile (the broadcast and a gap's filling both brought it).
+      while (!p.waiting.empty() && p.waiting.begin()->first < p.taken) p.waiting.erase(p.waiting.begin());
       if (p.waiting.empty() || p.waiting.begin()->first != p.taken || !p.compatible) continue;
       if (p.pending_pulls >= static_cast<size_t>(settings_.team_max_pending_pulls)) continue;
       name = n;
@@ -470,7 +481,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     if (Peer* p = peer(pending.peer)) {
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
-      p->unacknowledged.push_back(loop);
+      p->unacknowledged.push_back({loop, Clock::now()});
       p->to_loops.publish(loop);
       p->bytes_out += bytesOf(*loop);
     }
@@ -607,10 +618,15 @@ void TeamLink::tick() {
       p.bytes_out += bytesOf(request);
       p.backfill_asked = now;
     }
-    // Loops not acknowledged are sent again, in order.
-    for (const auto& loop : p.unacknowledged) {
-      p.to_loops.publish(loop);
-      p.bytes_out += bytesOf(*loop);
+    // Loops not acknowledged are sent again, in order, a bounded number per second.
+    size_t resent = 0;
+    for (auto& sent : p.unacknowledged) {
+      if (resent == kMaxResendsPerTick) break;
+      if (now - sent.at < kResendAfter) continue;
+      p.to_loops.publish(sent.loop);
+      p.bytes_out += bytesOf(*sent.loop);
+      sent.at = now;
+      ++resent;
     }
   }
   status->refused += refused_;

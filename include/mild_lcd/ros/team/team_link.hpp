@@ -94,8 +94,12 @@ class TeamLink {
     uint64_t taken = 0;   // its summaries taken (the ledger's count, readable under mutex_)
     double tokens = 0.0;  // its requests' budget (refilled per second)
     std::chrono::steady_clock::time_point refilled{};
-    std::map<uint64_t, Waiting> waiting;                      // by number: the next to take, and any ahead of a gap
-    std::deque<mild_lcd::TeamLoop::ConstPtr> unacknowledged;  // loops sent, by number
+    std::map<uint64_t, Waiting> waiting;  // by number: the next to take, and any ahead of a gap
+    struct Sent {
+      mild_lcd::TeamLoop::ConstPtr loop;
+      std::chrono::steady_clock::time_point at{};
+    };
+    std::deque<Sent> unacknowledged;  // loops sent, by number, until its heartbeat counts them
     size_t pending_pulls = 0;
     uint64_t summaries_in = 0, summary_bytes_in = 0, features_in = 0, feature_bytes_in = 0;
     uint64_t bytes_out = 0, loops_decided = 0, loops_found_late = 0, refused = 0, duplicates = 0, reconnects = 0;
