@@ -264,7 +264,11 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
       ++refused_;
     return;
   }
-  if (!connected(*p) && p->seen) p->reconnects++;
+  if (p->disconnected) {  // back after an outage: what it numbered meanwhile comes late
+    p->disconnected = false;
+    p->late_until = msg->summaries;
+    ++p->reconnects;
+  }
   p->seen = true;
   p->last_seen = Clock::now();
   p->summaries = msg->summaries;
@@ -353,12 +357,14 @@ bool TeamLink::takeNextSummary() {
       if (p.pending_pulls >= static_cast<size_t>(settings_.team_max_pending_pulls)) continue;
       name = n;
       next = p.waiting.begin()->second;
+      const uint64_t seq = p.waiting.begin()->first;
+      next.late = next.late || (seq >= p.late_from && (p.disconnected || seq < p.late_until));
       p.waiting.erase(p.waiting.begin());
       break;
     }
   }
   if (name.empty()) return false;
-  take(name, next.summary, next.backfill);
+  take(name, next.summary, next.late);
   return true;
 }
 
@@ -604,6 +610,10 @@ void TeamLink::tick() {
     status->loops_decided += p.loops_decided;
     status->loops_found_late += p.loops_found_late;
     status->refused += p.refused;
+    if (p.seen && !connected(p) && !p.disconnected) {
+      p.disconnected = true;
+      p.late_from = p.taken;
+    }
     if (!connected(p) || !p.compatible) continue;
     // Behind, and what is next is not waiting here: ask for it (again, if unanswered).
     const bool gap = p.summaries > p.taken && (p.waiting.empty() || p.waiting.begin()->first != p.taken);

@@ -82,7 +82,7 @@ class TeamLink {
  private:
   struct Waiting {  // a summary received ahead of its turn
     mild_lcd::PlaceSummary::ConstPtr summary;
-    bool backfill = false;  // sent on request, to fill a gap: a loop it gives is found late
+    bool late = false;  // sent to fill a gap, or numbered during an outage: a loop it gives is found late
   };
   struct Peer {
     std::chrono::steady_clock::time_point last_seen{};
@@ -91,7 +91,11 @@ class TeamLink {
     uint64_t summaries = 0;                                  // it has numbered, by its last heartbeat
     uint64_t acknowledged = 0;                               // loops of ours it took, by its last heartbeat
     std::chrono::steady_clock::time_point backfill_asked{};  // the last gap request
-    uint64_t taken = 0;   // its summaries taken (the ledger's count, readable under mutex_)
+    uint64_t taken = 0;  // its summaries taken (the ledger's count, readable under mutex_)
+    // An outage (no heartbeat for ~team/peer_timeout): its summaries numbered from late_from on,
+    // until late_until (its count when it came back), are taken late, whichever way they arrive.
+    bool disconnected = false;
+    uint64_t late_from = 0, late_until = 0;
     double tokens = 0.0;  // its requests' budget (refilled per second)
     std::chrono::steady_clock::time_point refilled{};
     std::map<uint64_t, Waiting> waiting;  // by number: the next to take, and any ahead of a gap
