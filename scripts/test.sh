@@ -59,6 +59,12 @@ else
   cmake --build "$BUILD_DIR" --target run_tests -j 1 || true
 fi
 if [[ -z "${MILD_SANITIZE:-}" ]]; then
+  # Three stations on three network namespaces through a link outage and a restart (root; ~5 min):
+  # counted from its JUnit file.
+  "$REPO/test/team/three_hosts.sh" --junit "$BUILD_DIR/test_results/mild_lcd/team-three_hosts.xml" \
+    || echo "[mild_lcd] the three-host team test failed" >&2
+fi
+if [[ -z "${MILD_SANITIZE:-}" ]]; then
   # A package of someone else's, built against the devel space (find_package(catkin COMPONENTS mild_lcd)).
   "$REPO/scripts/check_downstream.sh" || echo "[mild_lcd] the downstream package failed" >&2
 fi

@@ -195,22 +195,28 @@ TEST(RobotTeamRemote, AMapChangedStartsTheRemoteRobotsFiltersOver) {
     features.push_back(
         front_end.extract(Observation::ofImage(test::sampleFrames()[i], PixelFormat::kGray, 0.1 * i)).features);
   }
-  const auto answers = [&](bool change_between) {
+  const auto answers = [&](int change_between) {
     RobotTeam team(params, {"a"});
     for (int i = 0; i < 20; ++i) team.process(Observation::ofFeatures(features[i], 0.1 * i, i, 0));
     std::vector<double> beliefs;
     for (int i = 20; i < 30; ++i) {
-      if (change_between && i == 25) team.mapChanged(0);
+      if (change_between == 1 && i == 25) team.mapChanged(0);
+      if (change_between == 2 && i == 25) team.remoteSessionBegan("far/r");  // its station restarted
+      if (change_between == 3 && i == 25) team.remoteSessionBegan("other/r");
       const RobotTeam::RemoteAnswer a = team.askRemote("far/r", features[i - 15].descriptors, 500, {kAllKeyframes});
       beliefs.push_back(a.candidates.empty() ? 0.0 : a.candidates.front().filter_probability);
     }
     EXPECT_EQ(team.remoteRobots(), 1u);
     return beliefs;
   };
-  const std::vector<double> kept = answers(false), restarted = answers(true);
+  const std::vector<double> kept = answers(0);
   // Before the change the same; right after it the filter starts from "no loop" again.
-  for (int i = 0; i < 5; ++i) EXPECT_DOUBLE_EQ(kept[i], restarted[i]);
-  EXPECT_NE(kept[5], restarted[5]);
+  for (const int change : {1, 2}) {
+    const std::vector<double> restarted = answers(change);
+    for (int i = 0; i < 5; ++i) EXPECT_DOUBLE_EQ(kept[i], restarted[i]);
+    EXPECT_NE(kept[5], restarted[5]) << change;
+  }
+  EXPECT_EQ(answers(3), kept) << "another remote robot's new session changes nothing here";
   RobotTeam team(params, {"a", "b"});
   EXPECT_THROW(team.askRemote("far/r", features[0].descriptors, 500, {kAllKeyframes}), InvalidInput);
 }

@@ -7,6 +7,7 @@ the checker gets one file per recorder and tells a double report (twice in one f
 message seen by two recorders.
 
   record_loops.py --out FILE --label NAME --robots "robot1 robot2" [--status TOPIC] [--ready FILE]
+                  [--latest-status FILE] [--connections FILE]
 
 Every line is one message, stamped with the wall-clock time it arrived ("received", seconds since
 the epoch, the clock three_hosts.sh writes its schedule in):
@@ -21,6 +22,12 @@ message changes. Fields a message lacks are recorded as "" (the station fields o
 before the team link, or of the single-node reference run).
 --ready is written once every loop_closure topic has a publisher connected, so that the harness
 plays no keyframe whose answer could reach this recorder before it listens.
+--latest-status holds the last status of each station, with its arrival time, as one JSON object
+  {"alpha": {"received": 1796537079.27, "fields": {...}}, ...}, replaced (rename) at each status, so
+  that the harness can copy what every station said last before it stops one.
+--connections holds, per loop_closure topic, the publishers this recorder is connected to (their
+  XML-RPC URIs), replaced whenever they change: a restarted station is a new URI, so the harness
+  knows when this recorder listens to it again.
 """
 import argparse
 import json
@@ -52,6 +59,8 @@ class Recorder:
         self.out = open(args.out, "a", encoding="utf-8")
         self.lock = threading.Lock()  # rospy calls back from one thread per connection
         self.classes = {}  # (type, md5sum) -> the class generated from the publisher's definition
+        self.latest_path = args.latest_status
+        self.latest = {}  # station -> {"received": t, "fields": {...}}
         self.loop_subscribers = [
             rospy.Subscriber(f"/{robot}/loop_closure", rospy.AnyMsg, self.on_loop_closure,
                              callback_args=f"/{robot}/loop_closure", queue_size=1000)
@@ -76,6 +85,7 @@ class Recorder:
         with self.lock:
             self.out.write(line + "\n")
             self.out.flush()  # the harness polls the file to see when the stations are idle
+        return record
 
     def on_loop_closure(self, raw, topic):
         msg = self.decode(raw)
@@ -100,11 +110,27 @@ class Recorder:
         })
 
     def on_status(self, raw, topic):
-        self.write({"kind": "status", "topic": topic, "type": raw._connection_header["type"],
-                    "fields": plain(self.decode(raw))})
+        record = self.write({"kind": "status", "topic": topic, "type": raw._connection_header["type"],
+                             "fields": plain(self.decode(raw))})
+        if self.latest_path:
+            station = record["fields"].get("station", "")
+            with self.lock:
+                self.latest[station] = {"received": record["received"], "fields": record["fields"]}
+                write_json(self.latest_path, self.latest)
+
+    def connections(self):
+        """topic -> the URIs of the publishers connected (sorted)."""
+        return {s.resolved_name: sorted(c[1] for c in s.impl.get_stats_info()) for s in self.loop_subscribers}
 
     def connected(self):
         return all(s.get_num_connections() > 0 for s in self.loop_subscribers)
+
+
+def write_json(path, data):
+    """Replaced whole (a reader never sees half of it)."""
+    with open(path + ".tmp", "w", encoding="utf-8") as f:
+        json.dump(data, f, sort_keys=True)
+    os.replace(path + ".tmp", path)
 
 
 def main():
@@ -114,16 +140,22 @@ def main():
     parser.add_argument("--robots", required=True, help="robots whose /ROBOT/loop_closure to record")
     parser.add_argument("--status", default="", help="also record this topic (any type)")
     parser.add_argument("--ready", default="", help="file to create once every loop_closure topic is connected")
+    parser.add_argument("--latest-status", default="", help="file holding each station's last status (with --status)")
+    parser.add_argument("--connections", default="", help="file holding the publishers connected, per topic")
     args = parser.parse_args(rospy.myargv()[1:])
     rospy.init_node("mild_team_recorder", anonymous=True)  # anonymous: one per host, same master
     recorder = Recorder(args)
     ready = not args.ready
+    connections = None
     while not rospy.is_shutdown():
         if not ready and recorder.connected():
             with open(args.ready + ".tmp", "w", encoding="utf-8") as f:
                 f.write(f"{time.time()}\n")
             os.replace(args.ready + ".tmp", args.ready)
             ready = True
+        if args.connections and recorder.connections() != connections:
+            connections = recorder.connections()
+            write_json(args.connections, connections)
         time.sleep(0.1)  # wall time: rospy.sleep would follow /clock if someone published it
 
 

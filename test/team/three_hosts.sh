@@ -1,6 +1,7 @@
 #!/bin/bash
 # Three mild_lcd stations on three hosts find the loops between their groups of robots, through an
-# outage of one host's link, as one node serving all six robots does.
+# outage of one host's link, as one node serving all six robots does; then one station is restarted
+# on its saved maps and rejoins without a loop lost or repeated.
 #
 # The hosts are network namespaces on one machine, joined by veth pairs to a bridge in a fourth
 # namespace (the "switch"), so that cutting one host's link is `ip link set ... down` on its switch
@@ -18,18 +19,25 @@
 #   60   robot6 plays, inside host 3 (its station still gets its keyframes; its revisit of alpha's
 #        places is made while alpha cannot be reached)
 #   125  the link is restored; then the stations are given time to catch up (settle)
-# Before that, a reference: the same six bags into one node serving all six robots (no team link;
+# Then a restart: the last status of every station is kept (status_before_restart.json); charlie's
+# node gets SIGTERM (it saves its maps and its ledger, <maps>/charlie.team_ledger.json, which must
+# be there) and its station is started again on the same folder (persistent). Once it is heard again
+# and the recorders listen to it, robot6 revisits its frames 250..299 a second time under new
+# keyframe ids (1250..1299, a bag of their own) at 2 keyframes per second, and the stations settle;
+# the checker's (f) compares the statuses before and after, and the second revisit's loops with the first's.
+# Before all that, a reference: the same six bags into one node serving all six robots (no team link;
 # every keyframe asks every map), alone in a namespace of its own on loopback, robots 1-5 at once
 # and then robot6, at 5 keyframes per second. test/team/check_team.py compares the two runs with
 # the sample's ground truth; a recorder's arrival times and the schedule (events.json) tell it
 # which of robot6's keyframes were made during the outage.
 #
-# Needs root (namespaces) and the built devel space (BUILD_DIR, default .build). Takes ~4 minutes,
+# Needs root (namespaces) and the built devel space (BUILD_DIR, default .build). Takes ~5 minutes,
 # on two cores. Nothing leaves the namespaces: every address is 127.0.0.1 or 10.231.0.x inside
 # them, and nothing is routed out. Every namespace (with its veths) and every process in them is
 # removed on exit, also on failure or Ctrl-C.
 #   test/team/three_hosts.sh [--junit FILE] [--keep]
-#     --junit FILE  also write the verdict as a JUnit file of one test case, team.ThreeHostsWithAnOutage
+#     --junit FILE  also write the verdict as a JUnit file of one test case,
+#                   team.ThreeHostsWithAnOutageAndARestart
 #                   (scripts/test.sh counts it from its test_results folder)
 #     --keep        keep the work folder (logs, recordings) after a pass too; a failure always keeps it
 #   MILD_TEAM_BAGS=DIR             make the bags there once and reuse them (default: in the work folder);
@@ -43,7 +51,7 @@ HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 REPO="$(cd "$HERE/../.." && pwd)"
 BUILD_DIR="${BUILD_DIR:-$REPO/.build}"
 SAMPLE="$REPO/sample/corridor"
-TEST_NAME="ThreeHostsWithAnOutage"
+TEST_NAME="ThreeHostsWithAnOutageAndARestart"
 
 JUNIT=""
 KEEP=0
@@ -71,6 +79,15 @@ READY_TIMEOUT="${MILD_TEAM_READY_TIMEOUT:-120}"
 # The reference plays faster (it has no outage to wait through) into a queue that holds every keyframe.
 REFERENCE_KEYFRAMES_PER_SECOND="${MILD_TEAM_REFERENCE_KEYFRAMES_PER_SECOND:-5}"
 REFERENCE_TIMEOUT="${MILD_TEAM_REFERENCE_TIMEOUT:-180}"
+# The restart: how long the station may take to go down (saving) and to be heard again (loading).
+RESTART_TIMEOUT="${MILD_TEAM_RESTART_TIMEOUT:-90}"
+# robot6's second revisit: its frames under ids shifted by REVISIT_ID_OFFSET, played at this rate,
+# then the stations settle as above (at least REVISIT_SETTLE s, QUIET s quiet, REVISIT_SETTLE_MAX s).
+REVISIT_ID_OFFSET=1000
+REVISIT_KEYFRAMES_PER_SECOND="${MILD_TEAM_REVISIT_KEYFRAMES_PER_SECOND:-2}"
+REVISIT_SETTLE="${MILD_TEAM_REVISIT_SETTLE:-10}"
+REVISIT_SETTLE_MAX="${MILD_TEAM_REVISIT_SETTLE_MAX:-60}"
+RESTARTED=charlie  # the station restarted: host 3's, whose robot6 revisits
 
 FRAMES_PER_ROBOT=50
 ALL_ROBOTS=(robot1 robot2 robot3 robot4 robot5 robot6)
@@ -209,6 +226,16 @@ run_in() {
   PIDS[$name]=$!
 }
 
+# poll_until TIMEOUT CMD...: poll CMD every 0.2 s; false after TIMEOUT seconds.
+poll_until() {
+  local deadline=$(( $(date +%s) + $1 ))
+  shift
+  until "$@"; do
+    [[ $(date +%s) -lt $deadline ]] || return 1
+    sleep 0.2
+  done
+}
+
 # wait_until TIMEOUT WHAT CMD...: poll CMD every 0.2 s; fail naming WHAT after TIMEOUT seconds.
 wait_until() {
   local timeout=$1 what=$2
@@ -239,32 +266,44 @@ master_up() {  # NS IP MASTER
 # one space unpauses it at its scheduled time. Unlike rosbag's pause service this needs no master,
 # so robot6 starts on time while its host is cut off from the master. --wait-for-subscribers: its
 # station listens before the first keyframe.
-declare -A PLAYER_KEYS=()  # robot -> fd of its FIFO
-start_player() {  # NS NAME IP MASTER ROBOT RATE
-  local ns=$1 name=$2 ip=$3 master=$4 robot=$5 rate=$6 index=${5#robot}
+declare -A PLAYER_KEYS=()  # key (the robot, or robot6_revisit) -> fd of its player's FIFO
+bag_of() {  # ROBOT [ID_OFFSET]: the bag of the robot's frames, under ids shifted by ID_OFFSET
+  local index=${1#robot} offset=${2:-0}
   local first=$(( (index - 1) * FRAMES_PER_ROBOT ))
+  if [[ $offset -eq 0 ]]; then
+    echo "$BAGS/$1-$first-$(( first + FRAMES_PER_ROBOT )).bag"
+  else
+    echo "$BAGS/$1-ids$(( first + offset ))-$(( first + offset + FRAMES_PER_ROBOT )).bag"
+  fi
+}
+start_player() {  # NS NAME IP MASTER KEY BAG RATE
+  local ns=$1 name=$2 ip=$3 master=$4 key=$5 bag=$6 rate=$7
   local fifo="$WORK/$name.keys" fd
   mkfifo "$fifo"
   exec {fd}<>"$fifo"  # read-write: opens without a reader, and the player never sees end-of-file
-  PLAYER_KEYS[$robot]=$fd
+  PLAYER_KEYS[$key]=$fd
   run_in "$ns" "$name" "$ip" "$master" --stdin "$fifo" \
-    rosrun rosbag play --pause --wait-for-subscribers -r "$rate" "$BAGS/$robot-$first-$(( first + FRAMES_PER_ROBOT )).bag"
+    rosrun rosbag play --pause --wait-for-subscribers -r "$rate" "$bag"
 }
 player_ready() { grep -q "Finished waiting for subscribers" "$WORK/logs/$1.log"; }
-unpause() {  # ROBOT...
-  local robot fd
-  for robot in "$@"; do
-    fd=${PLAYER_KEYS[$robot]}
+unpause() {  # KEY...
+  local key fd
+  for key in "$@"; do
+    fd=${PLAYER_KEYS[$key]}
     printf ' ' >&"$fd"
     exec {fd}>&-
   done
 }
 
 # record NS NAME IP MASTER ROBOTS [STATUS_TOPIC]: a recorder of those robots' loop_closure topics
-# into NAME.jsonl, which creates NAME.ready once it is connected to each.
+# into NAME.jsonl, which creates NAME.ready once it is connected to each, keeps the publishers it
+# is connected to in NAME.connections.json and, with STATUS_TOPIC, each station's last status in
+# NAME.latest_status.json.
 record() {
+  local status_args=()
+  [[ -z "${6:-}" ]] || status_args=(--status "$6" --latest-status "$WORK/$2.latest_status.json")
   run_in "$1" "$2" "$3" "$4" /usr/bin/python3 "$HERE/record_loops.py" --out "$WORK/$2.jsonl" --label "$2" \
-    --robots "$5" --status "${6:-}" --ready "$WORK/$2.ready"
+    --robots "$5" --ready "$WORK/$2.ready" --connections "$WORK/$2.connections.json" "${status_args[@]}"
 }
 
 # Loop closures received so far by the recorders named (their files' lines of kind loop).
@@ -310,20 +349,83 @@ event() {  # NAME: the wall-clock time of a scheduled action, for the checker
   echo "\"$1\": $(date +%s.%N)," >>"$WORK/events.part"
 }
 
+# settle MIN MAX: at least MIN seconds, then until no loop_closure reached a recorder for QUIET
+# seconds, at most MAX seconds in all.
+settle() {
+  pause_for "$1"
+  local deadline=$(( $(date +%s) + $2 - $1 ))
+  local last_count quiet_since count
+  last_count=$(loops_received host1 host3) quiet_since=$(date +%s)
+  while [[ $(date +%s) -lt $deadline && $(( $(date +%s) - quiet_since )) -lt $QUIET ]]; do
+    sleep 1
+    count=$(loops_received host1 host3)
+    if [[ $count -ne $last_count ]]; then last_count=$count quiet_since=$(date +%s); fi
+  done
+}
+
+# The pid of STATION's node (named mild_lcd_STATION, as the launch file names it) in namespace NS.
+station_node_pid() {  # NS STATION
+  local pid
+  for pid in $(ip netns pids "$1"); do
+    if tr '\0' '\n' <"/proc/$pid/cmdline" 2>/dev/null | grep -qx "__name:=mild_lcd_$2"; then
+      echo "$pid"
+      return 0
+    fi
+  done
+  return 1
+}
+
+# The host 1 recorder has a status of STATION that arrived after SINCE (epoch seconds).
+heard_since() {  # STATION SINCE
+  /usr/bin/python3 - "$WORK/host1.latest_status.json" "$1" "$2" <<'EOF'
+import json, sys
+path, station, since = sys.argv[1], sys.argv[2], float(sys.argv[3])
+try:
+    with open(path, encoding="utf-8") as f:
+        latest = json.load(f)
+except (OSError, ValueError):
+    sys.exit(1)
+sys.exit(0 if latest.get(station, {}).get("received", 0.0) > since else 1)
+EOF
+}
+
+# Recorder NAME is connected to a publisher of each TOPIC, and to none of those it had in BEFORE
+# (an earlier copy of its connections file): it listens to the restarted station.
+reconnected() {  # NAME BEFORE TOPIC...
+  /usr/bin/python3 - "$WORK/$1.connections.json" "$2" "${@:3}" <<'EOF'
+import json, sys
+now_path, before_path, topics = sys.argv[1], sys.argv[2], sys.argv[3:]
+try:
+    with open(now_path, encoding="utf-8") as f:
+        now = json.load(f)
+    with open(before_path, encoding="utf-8") as f:
+        before = json.load(f)
+except (OSError, ValueError):
+    sys.exit(1)
+sys.exit(0 if all(now.get(t) and not set(now[t]) & set(before.get(t, [])) for t in topics) else 1)
+EOF
+}
+
 # --- bags -------------------------------------------------------------------------------------
 STEP="making the bags"
-for robot in "${ALL_ROBOTS[@]}"; do
+# Each robot's frames under their own ids, and robot6's again under ids REVISIT_ID_OFFSET above,
+# stamped 1000 s later (mild_make_bag's default start is 1000 s): its second revisit.
+for robot in "${ALL_ROBOTS[@]}" robot6:$REVISIT_ID_OFFSET; do
+  offset=${robot#*:} robot=${robot%:*}
+  [[ $offset == "$robot" ]] && offset=0
   first=$(( (${robot#robot} - 1) * FRAMES_PER_ROBOT ))
-  bag="$BAGS/$robot-$first-$(( first + FRAMES_PER_ROBOT )).bag"
+  bag=$(bag_of "$robot" "$offset")
   [[ -s "$bag" ]] && continue
   "$MAKE_BAG" --images "$SAMPLE" --output "$bag.tmp" --keyframe-topic "/$robot/keyframe" \
-    --frames "$first" "$(( first + FRAMES_PER_ROBOT ))" --no-images >>"$WORK/logs/make_bag.log" 2>&1
+    --frames "$first" "$(( first + FRAMES_PER_ROBOT ))" --keyframe-id-offset "$offset" \
+    --start "$(( offset == 0 ? 1000 : 2000 ))" --no-images >>"$WORK/logs/make_bag.log" 2>&1
   mv "$bag.tmp" "$bag"
 done
 # rosbag play -r: the wanted keyframes per second over the sample's frame rate (times.txt).
 FPS=$(awk 'NR == 1 { first = $1 } { last = $1; n = NR } END { printf "%.6f", (n - 1) / (last - first) }' "$SAMPLE/times.txt")
 RATE=$(awk -v k="$KEYFRAMES_PER_SECOND" -v f="$FPS" 'BEGIN { printf "%.6f", k / f }')
 REFERENCE_RATE=$(awk -v k="$REFERENCE_KEYFRAMES_PER_SECOND" -v f="$FPS" 'BEGIN { printf "%.6f", k / f }')
+REVISIT_RATE=$(awk -v k="$REVISIT_KEYFRAMES_PER_SECOND" -v f="$FPS" 'BEGIN { printf "%.6f", k / f }')
 echo "sample at $FPS frames/s: distributed run at rate $RATE, reference at $REFERENCE_RATE"
 
 # --- reference: one node, six robots ----------------------------------------------------------
@@ -338,7 +440,7 @@ eval "reference_argv=($REFERENCE_CMD)"
 run_in "$REFERENCE_NS" ref_node 127.0.0.1 "$REF_MASTER" "${reference_argv[@]}"
 record "$REFERENCE_NS" reference 127.0.0.1 "$REF_MASTER" "${ALL_ROBOTS[*]}"
 for robot in "${ALL_ROBOTS[@]}"; do
-  start_player "$REFERENCE_NS" "ref_play_$robot" 127.0.0.1 "$REF_MASTER" "$robot" "$REFERENCE_RATE"
+  start_player "$REFERENCE_NS" "ref_play_$robot" 127.0.0.1 "$REF_MASTER" "$robot" "$(bag_of "$robot")" "$REFERENCE_RATE"
 done
 STEP="waiting for the reference node, recorder and players"
 wait_until "$READY_TIMEOUT" "the reference recorder" test -e "$WORK/reference.ready"
@@ -382,19 +484,20 @@ run_in "${HOST_NS[0]}" roscore "${HOST_IPS[0]}" "$MASTER_URI" roscore
 for i in 0 1 2; do
   wait_until 60 "the master from host $(( i + 1 ))" master_up "${HOST_NS[i]}" "${HOST_IPS[i]}" "$MASTER_URI"
 done
-station_argv=()
-for i in 0 1 2; do
+start_station() {  # HOST_INDEX NAME: station STATIONS[HOST_INDEX] in its host, as process NAME
+  local i=$1 station_argv=()
   # shellcheck disable=SC2034  # ROBOTS and MAPS are read by the eval of STATION_CMD
-  STATION=${STATIONS[i]} ROBOTS=${STATION_ROBOTS[i]} MAPS="$WORK/maps/${STATIONS[i]}"
+  local STATION=${STATIONS[i]} ROBOTS=${STATION_ROBOTS[i]} MAPS="$WORK/maps/${STATIONS[i]}"
   mkdir -p "$MAPS"
   eval "station_argv=($STATION_CMD)"
-  run_in "${HOST_NS[i]}" "station_$STATION" "${HOST_IPS[i]}" "$MASTER_URI" "${station_argv[@]}"
-done
+  run_in "${HOST_NS[i]}" "$2" "${HOST_IPS[i]}" "$MASTER_URI" "${station_argv[@]}"
+}
+for i in 0 1 2; do start_station "$i" "station_${STATIONS[i]}"; done
 record "${HOST_NS[0]}" host1 "${HOST_IPS[0]}" "$MASTER_URI" "${ALL_ROBOTS[*]}" "$STATUS_TOPIC"
 record "${HOST_NS[2]}" host3 "${HOST_IPS[2]}" "$MASTER_URI" "${STATION_ROBOTS[2]}"
 for robot in "${ALL_ROBOTS[@]}"; do
   i=$(( (${robot#robot} - 1) / 2 ))  # robots 1-2 on host 1, 3-4 on host 2, 5-6 on host 3
-  start_player "${HOST_NS[i]}" "play_$robot" "${HOST_IPS[i]}" "$MASTER_URI" "$robot" "$RATE"
+  start_player "${HOST_NS[i]}" "play_$robot" "${HOST_IPS[i]}" "$MASTER_URI" "$robot" "$(bag_of "$robot")" "$RATE"
 done
 STEP="waiting for the stations, recorders and players"
 wait_until "$READY_TIMEOUT" "the host 1 recorder" test -e "$WORK/host1.ready"
@@ -423,28 +526,82 @@ event restore
 echo "t0+$RESTORE_AT: host 3 back"
 
 STEP="letting the stations settle"
-pause_for "$SETTLE"
-settle_deadline=$(( $(date +%s) + SETTLE_MAX - SETTLE ))
-last_count=$(loops_received host1 host3) quiet_since=$(date +%s)
-while [[ $(date +%s) -lt $settle_deadline && $(( $(date +%s) - quiet_since )) -lt $QUIET ]]; do
-  sleep 1
-  count=$(loops_received host1 host3)
-  if [[ $count -ne $last_count ]]; then last_count=$count quiet_since=$(date +%s); fi
+settle "$SETTLE" "$SETTLE_MAX"
+event settled
+echo "t0+$(awk -v t="$T0" -v now="$(date +%s.%N)" 'BEGIN { printf "%.0f", now - t }'): settled"
+
+# --- restart ----------------------------------------------------------------------------------
+# The station of host 3 is stopped as a service manager would (SIGTERM to its node, which saves
+# its maps and ledger on the way down; its roslaunch then ends, having nothing left to run) and
+# started again on the same folder, persistent: it must rejoin where it left.
+STEP="restarting station $RESTARTED"
+RESTART_HOST=2
+[[ ${STATIONS[RESTART_HOST]} == "$RESTARTED" ]] || die "station $RESTARTED is not on host $(( RESTART_HOST + 1 ))"
+LEDGER="$WORK/maps/$RESTARTED/$RESTARTED.team_ledger.json"
+node_pid=$(station_node_pid "${HOST_NS[RESTART_HOST]}" "$RESTARTED") ||
+  die "no process named __name:=mild_lcd_$RESTARTED in host $(( RESTART_HOST + 1 )) (a MILD_TEAM_STATION_CMD that names it otherwise?)"
+# What every station said last, and who each recorder listens to, before the restart.
+cp "$WORK/host1.latest_status.json" "$WORK/status_before_restart.json"
+cp "$WORK/host1.connections.json" "$WORK/host1.connections_before_restart.json"
+cp "$WORK/host3.connections.json" "$WORK/host3.connections_before_restart.json"
+event restart_sigterm
+sigterm_at=$(date +%s)
+kill -TERM "$node_pid"
+node_down() { ! kill -0 "$node_pid" 2>/dev/null; }
+wait_until "$RESTART_TIMEOUT" "$RESTARTED's node to end after SIGTERM" node_down
+launch_down() { exited "station_$RESTARTED"; }
+# roslaunch ends once its only node has; if it does not, it is asked to.
+poll_until 15 launch_down || stop "station_$RESTARTED"
+event restart_down
+[[ -s "$LEDGER" ]] || die "$RESTARTED saved no ledger on SIGTERM: $LEDGER is missing or empty"
+(( $(stat -c %Y "$LEDGER") >= sigterm_at )) || die "$RESTARTED's ledger $LEDGER was not written on SIGTERM"
+echo "$RESTARTED: SIGTERM, saved $(grep -c 'saved .* keyframes' "$WORK/logs/station_$RESTARTED.log" || true) maps and its ledger ($(stat -c %s "$LEDGER") bytes)"
+start_station "$RESTART_HOST" "station_${RESTARTED}_restarted"
+event restart_start
+restart_start=$(date +%s.%N)
+wait_until "$RESTART_TIMEOUT" "the restarted $RESTARTED's status" heard_since "$RESTARTED" "$restart_start"
+# Answers published before a recorder connects to the new node would be lost to it.
+restarted_topics=()
+for robot in ${STATION_ROBOTS[RESTART_HOST]}; do restarted_topics+=("/$robot/loop_closure"); done
+for name in host1 host3; do
+  wait_until "$RESTART_TIMEOUT" "the $name recorder to connect to the restarted $RESTARTED" \
+    reconnected "$name" "$WORK/$name.connections_before_restart.json" "${restarted_topics[@]}"
 done
+event restart_up
+echo "$RESTARTED: heard again $(awk -v t="$restart_start" -v now="$(date +%s.%N)" 'BEGIN { printf "%.1f", now - t }') s after its start"
+
+# --- second revisit ---------------------------------------------------------------------------
+STEP="robot6's second revisit"
+start_player "${HOST_NS[RESTART_HOST]}" play_robot6_revisit "${HOST_IPS[RESTART_HOST]}" "$MASTER_URI" \
+  robot6_revisit "$(bag_of robot6 "$REVISIT_ID_OFFSET")" "$REVISIT_RATE"
+wait_until "$READY_TIMEOUT" "robot6's second revisit player" player_ready play_robot6_revisit
+unpause robot6_revisit
+event revisit_start
+echo "robot6 revisits again (ids $(( 250 + REVISIT_ID_OFFSET ))..$(( 299 + REVISIT_ID_OFFSET )), $REVISIT_KEYFRAMES_PER_SECOND keyframes/s)"
+revisit_played() { exited play_robot6_revisit; }
+wait_until "$(awk -v n="$FRAMES_PER_ROBOT" -v k="$REVISIT_KEYFRAMES_PER_SECOND" 'BEGIN { printf "%d", n / k + 60 }')" \
+  "robot6's second revisit to be played" revisit_played
+event revisit_end
+settle "$REVISIT_SETTLE" "$REVISIT_SETTLE_MAX"
 event stop
+echo "t0+$(awk -v t="$T0" -v now="$(date +%s.%N)" 'BEGIN { printf "%.0f", now - t }'): stop"
 for robot in "${ALL_ROBOTS[@]}"; do
   kill -0 "${PIDS[play_$robot]}" 2>/dev/null && echo "three_hosts.sh: $robot's player still runs at the end" >&2
 done
 stop host1 host3
-stop station_alpha station_bravo station_charlie
+stop station_alpha station_bravo "station_${RESTARTED}_restarted"
 stop roscore
 { echo "{"; sed '$ s/,$//' "$WORK/events.part"; echo "}"; } >"$WORK/events.json"
 
 # --- check ------------------------------------------------------------------------------------
 STEP="checking the recordings"
 set +e
+bags=()
+for robot in "${ALL_ROBOTS[@]}"; do bags+=("$(bag_of "$robot")"); done
 CHECK_OUTPUT=$(/usr/bin/python3 "$HERE/check_team.py" --gt "$SAMPLE/gt_loops.txt" --reference "$WORK/reference.jsonl" \
-  --distributed "$WORK/host1.jsonl" "$WORK/host3.jsonl" --events "$WORK/events.json" 2>&1)
+  --distributed "$WORK/host1.jsonl" "$WORK/host3.jsonl" --events "$WORK/events.json" \
+  --restarted "$RESTARTED" --status-before-restart "$WORK/status_before_restart.json" \
+  --revisit-id-offset "$REVISIT_ID_OFFSET" --bags "${bags[@]}" 2>&1)
 check_status=$?
 set -e
 echo "$CHECK_OUTPUT" | tee "$WORK/check.txt"

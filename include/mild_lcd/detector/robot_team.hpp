@@ -65,6 +65,9 @@ class RobotTeam {
   // none verified), scores and ranks them, at most max_candidates. The maps must not have been
   // replaced since askRemote (they may have grown). query_robot is left 0: the query is remote.
   DetectionResult judgeRemote(RemoteAnswer answer, const Features* features) const;
+  // A remote robot began a new session (its station restarted on its saved maps, it was moved): its
+  // next keyframes do not follow its last ones, and its filters into this team's maps start over.
+  void remoteSessionBegan(const std::string& remote_robot);
   static constexpr size_t kMaxRemoteRobots = 256;
   size_t remoteRobots() const { return remote_filters_.size(); }
 

@@ -118,6 +118,12 @@ DetectionResult RobotTeam::judgeRemote(RemoteAnswer answer, const Features* feat
   return result;
 }
 
+void RobotTeam::remoteSessionBegan(const std::string& remote_robot) {
+  const auto it = remote_filters_.find(remote_robot);
+  if (it == remote_filters_.end()) return;
+  for (auto& f : it->second) f->reset();
+}
+
 void RobotTeam::mapChanged(size_t robot) {
   for (size_t other = 0; other < robots_.size(); ++other) {
     if (other == robot) continue;

@@ -187,6 +187,7 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
   if (const auto index = map.find(own.id)) {
     const mild::Features features = map.features(*index);
     msg->stamp = stampOf(map.record(*index).stamp);
+    msg->session = map.record(*index).session;
     msg->features = static_cast<uint32_t>(features.descriptors.size());
     mild::appendDescriptorBytes(mild::strongestDescriptors(features, summary_descriptors_), msg->descriptors);
   }
@@ -386,13 +387,19 @@ void TeamLink::take(const std::string& name, const mild_lcd::PlaceSummary::Const
         mild::descriptorsFromBytes(msg->descriptors.data(), msg->descriptors.size(), descriptor_bytes_);
     if (descriptors.empty()) return;
     const mild::PlaceSummary summary = coreSummary(*msg);
+    const std::string remote = name + "/" + msg->robot;
+    const auto last_session = remote_sessions_.find(remote);
+    if (last_session != remote_sessions_.end() && last_session->second != msg->session) {
+      shared_.team->remoteSessionBegan(remote);
+    }
+    if (remote_sessions_.size() < 4 * mild::RobotTeam::kMaxRemoteRobots) remote_sessions_[remote] = msg->session;
     std::vector<mild::KeyframeIndex> eligible;
     for (size_t r = 0; r < robot_names_.size(); ++r) {
       eligible.push_back(
           ledger_.eligiblePrefix(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()), summary));
     }
     try {
-      pending.answer = shared_.team->askRemote(name + "/" + msg->robot, descriptors, msg->features, eligible);
+      pending.answer = shared_.team->askRemote(remote, descriptors, msg->features, eligible);
     } catch (const mild::InvalidInput&) {
       std::lock_guard<std::mutex> guard(mutex_);
       if (Peer* p = peer(name)) ++p->refused;  // too many remote robots
@@ -438,10 +445,10 @@ void TeamLink::onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply) {
     if (it == pending_.end() || it->second.peer != reply->from) return;  // answered already, or not ours
     Peer* p = peer(reply->from);
     if (!p) return;
-    ++p->features_in;
-    p->feature_bytes_in += bytesOf(*reply);
     if (reply->status == mild_lcd::TeamFeatures::BUSY) return;  // asked again after kResendAfter
     if (reply->status == mild_lcd::TeamFeatures::OK) {
+      ++p->features_in;
+      p->feature_bytes_in += bytesOf(*reply);
       try {
         features = featuresFromMsg(reply->keyframe);
         verify = features.descriptors.size() <= static_cast<size_t>(settings_.max_keyframe_features);

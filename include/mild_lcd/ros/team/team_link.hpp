@@ -163,7 +163,8 @@ class TeamLink {
   std::deque<mild_lcd::TeamRequest::ConstPtr> requests_;
   std::deque<mild_lcd::TeamFeatures::ConstPtr> replies_;
   std::deque<mild_lcd::TeamLoop::ConstPtr> loops_;
-  std::map<uint64_t, Pending> pending_;  // by request id
+  std::map<uint64_t, Pending> pending_;              // by request id
+  std::map<std::string, uint32_t> remote_sessions_;  // per remote robot: its last summary's session (thread only)
   uint64_t next_request_ = 1;
   uint64_t refused_ = 0;  // from no peer (malformed names, too many peers, full inboxes)
   uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
