@@ -153,7 +153,7 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   ledger.took("bravo");
   ledger.took("bravo");
   ledger.recordOwn(0, 11, 0);
-  ledger.recordOwn(1, 12, 0);
+  ledger.recordOwn(1, 12, 0, {"charlie"});  // charlie could not be heard from then
   ledger.nextLoopFor("bravo");
   ledger.tookLoop("charlie");
   const std::string text = ledger.toText();
@@ -166,6 +166,7 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   EXPECT_EQ(again.loopsSentTo("bravo"), 1u);
   EXPECT_EQ(again.loopsReceivedFrom("charlie"), 1u);
   EXPECT_EQ(again.own(1).known, (std::vector<std::pair<std::string, uint64_t>>{{"bravo", 2}}));
+  EXPECT_EQ(again.own(1).unreachable, std::vector<std::string>{"charlie"});
 
   StationLedger other("bravo", 2);
   EXPECT_THROW(other.fromText(text), InvalidInput);

@@ -28,6 +28,9 @@ struct PlaceSummary {
   // when it stored this keyframe. Which keyframes of two stations came first is decided by this
   // (StationLedger::eligiblePrefix), never by their clocks.
   std::vector<std::pair<std::string, uint64_t>> known;
+  // The stations it had not heard from for a while when it stored this keyframe (an outage): to
+  // them, a loop of this keyframe is found late.
+  std::vector<std::string> unreachable;
 };
 
 // The descriptors a summary carries: the `count` of the strongest keypoints (by detector response;

@@ -37,14 +37,16 @@ class StationLedger {
 
   const std::string& station() const { return station_; }
 
-  // One of this station's keyframes: robot's keyframe `id`, stored at `map_index` of its map.
-  // Returns its summary's number; what this station knew of each peer is recorded with it.
-  uint64_t recordOwn(size_t robot, uint64_t id, KeyframeIndex map_index);
+  // One of this station's keyframes: robot's keyframe `id`, stored at `map_index` of its map, while
+  // the stations `unreachable` could not be heard from. Returns its summary's number; what this
+  // station knew of each peer is recorded with it.
+  uint64_t recordOwn(size_t robot, uint64_t id, KeyframeIndex map_index, std::vector<std::string> unreachable = {});
   uint64_t ownCount() const { return own_.size(); }
   struct Own {
     size_t robot = 0;
     uint64_t id = 0;
     std::vector<std::pair<std::string, uint64_t>> known;  // as PlaceSummary::known
+    std::vector<std::string> unreachable;                 // as PlaceSummary::unreachable
   };
   const Own& own(uint64_t seq) const { return own_.at(seq); }
 

@@ -22,11 +22,13 @@ StationLedger::StationLedger(std::string station, size_t robots)
   if (robots_ == 0) throw InvalidInput("a station needs at least one robot");
 }
 
-uint64_t StationLedger::recordOwn(size_t robot, uint64_t id, KeyframeIndex map_index) {
+uint64_t StationLedger::recordOwn(size_t robot, uint64_t id, KeyframeIndex map_index,
+                                  std::vector<std::string> unreachable) {
   if (robot >= robots_) throw InvalidInput("no robot " + std::to_string(robot));
   Own entry;
   entry.robot = robot;
   entry.id = id;
+  entry.unreachable = std::move(unreachable);
   for (const auto& [peer, count] : received_) entry.known.emplace_back(peer, count);
   const uint64_t seq = own_.size();
   own_.push_back(std::move(entry));
@@ -113,7 +115,9 @@ std::string StationLedger::toText() const {
   j["station"] = station_;
   j["robots"] = robots_;
   nlohmann::json own = nlohmann::json::array();
-  for (const Own& o : own_) own.push_back({{"robot", o.robot}, {"id", o.id}, {"known", o.known}});
+  for (const Own& o : own_) {
+    own.push_back({{"robot", o.robot}, {"id", o.id}, {"known", o.known}, {"unreachable", o.unreachable}});
+  }
   j["own"] = std::move(own);
   nlohmann::json numbered = nlohmann::json::array();
   for (const auto& list : numbered_) {
@@ -143,6 +147,7 @@ void StationLedger::fromText(const std::string& text) {
       entry.robot = o.at("robot").get<size_t>();
       entry.id = o.at("id").get<uint64_t>();
       entry.known = o.at("known").get<std::vector<std::pair<std::string, uint64_t>>>();
+      entry.unreachable = o.at("unreachable").get<std::vector<std::string>>();
       if (entry.robot >= robots_) throw InvalidInput("a keyframe of robot " + std::to_string(entry.robot));
       own.push_back(std::move(entry));
     }

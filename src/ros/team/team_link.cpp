@@ -159,7 +159,14 @@ void TeamLink::save() {
 // --- this station's keyframes ---
 
 void TeamLink::stored(const mild::DetectionResult& result) {
-  const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index);
+  std::vector<std::string> unreachable;  // told in the summary: to them, its loops come late
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    for (const auto& [name, p] : peers_) {
+      if (p.seen && !connected(p)) unreachable.push_back(name);
+    }
+  }
+  const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
   const mild_lcd::PlaceSummary::ConstPtr msg = summaryOf(seq);
   summaries_pub_.publish(msg);
   std::lock_guard<std::mutex> guard(mutex_);
@@ -181,6 +188,7 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
     msg->known_stations.push_back(peer);
     msg->known_counts.push_back(count);
   }
+  msg->unreachable = own.unreachable;
   const mild::KeyframeMap& map = shared_.robot(own.robot).map();
   // A map replaced since (a load, a reset) no longer holds it: the summary goes without
   // descriptors, so that the peer counts it and finds nothing in it.
@@ -234,7 +242,7 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
       width == static_cast<size_t>(descriptor_bytes_) && bytes <= kMaxMessageBytes &&
       msg->descriptors.size() % width == 0 && msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
       msg->known_stations.size() == msg->known_counts.size() && msg->known_stations.size() <= kMaxPeers + 1 &&
-      !msg->robot.empty() && msg->robot.size() <= kMaxNameLength;
+      msg->unreachable.size() <= kMaxPeers + 1 && !msg->robot.empty() && msg->robot.size() <= kMaxNameLength;
   if (!well_formed) {
     ++p->refused;
     return;
@@ -250,7 +258,10 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
     if (msg->seq > p->waiting.rbegin()->first) return;
     p->waiting.erase(std::prev(p->waiting.end()));
   }
-  p->waiting[msg->seq] = Waiting{msg, backfill};
+  // Late: sent to fill a gap, or stored by its station while it could not hear from this one.
+  const bool late = backfill || std::find(msg->unreachable.begin(), msg->unreachable.end(), settings_.team_station) !=
+                                    msg->unreachable.end();
+  p->waiting[msg->seq] = Waiting{msg, late};
   wake_.notify_one();
 }
 
@@ -265,11 +276,7 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
       ++refused_;
     return;
   }
-  if (p->disconnected) {  // back after an outage: what it numbered meanwhile comes late
-    p->disconnected = false;
-    p->late_until = msg->summaries;
-    ++p->reconnects;
-  }
+  if (!connected(*p) && p->seen) ++p->reconnects;
   p->seen = true;
   p->last_seen = Clock::now();
   p->summaries = msg->summaries;
@@ -358,8 +365,6 @@ bool TeamLink::takeNextSummary() {
       if (p.pending_pulls >= static_cast<size_t>(settings_.team_max_pending_pulls)) continue;
       name = n;
       next = p.waiting.begin()->second;
-      const uint64_t seq = p.waiting.begin()->first;
-      next.late = next.late || (seq >= p.late_from && (p.disconnected || seq < p.late_until));
       p.waiting.erase(p.waiting.begin());
       break;
     }
@@ -617,10 +622,6 @@ void TeamLink::tick() {
     status->loops_decided += p.loops_decided;
     status->loops_found_late += p.loops_found_late;
     status->refused += p.refused;
-    if (p.seen && !connected(p) && !p.disconnected) {
-      p.disconnected = true;
-      p.late_from = p.taken;
-    }
     if (!connected(p) || !p.compatible) continue;
     // Behind, and what is next is not waiting here: ask for it (again, if unanswered).
     const bool gap = p.summaries > p.taken && (p.waiting.empty() || p.waiting.begin()->first != p.taken);

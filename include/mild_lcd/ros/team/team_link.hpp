@@ -91,11 +91,7 @@ class TeamLink {
     uint64_t summaries = 0;                                  // it has numbered, by its last heartbeat
     uint64_t acknowledged = 0;                               // loops of ours it took, by its last heartbeat
     std::chrono::steady_clock::time_point backfill_asked{};  // the last gap request
-    uint64_t taken = 0;  // its summaries taken (the ledger's count, readable under mutex_)
-    // An outage (no heartbeat for ~team/peer_timeout): its summaries numbered from late_from on,
-    // until late_until (its count when it came back), are taken late, whichever way they arrive.
-    bool disconnected = false;
-    uint64_t late_from = 0, late_until = 0;
+    uint64_t taken = 0;   // its summaries taken (the ledger's count, readable under mutex_)
     double tokens = 0.0;  // its requests' budget (refilled per second)
     std::chrono::steady_clock::time_point refilled{};
     std::map<uint64_t, Waiting> waiting;  // by number: the next to take, and any ahead of a gap
