@@ -114,8 +114,24 @@ class LoopClosureNodelet : public nodelet::Nodelet {
                                                      static_cast<size_t>(settings_.debug_image_cache_mb) << 20);
     KeyframeWorker::Hooks hooks;
     hooks.startup = [this] {
-      loadOnStart();
-      if (team_link_) team_link_->start();  // on the maps just loaded
+      // The team link starts on the maps just loaded, also when one robot's failed (the others'
+      // keyframes go on); a link that cannot start (an unreadable ledger) stays off and never
+      // writes over its ledger.
+      const auto start_team = [this] {
+        if (!team_link_) return;
+        try {
+          team_link_->start();
+        } catch (const std::exception& e) {
+          NODELET_FATAL("the team link (~team/station %s) is off: %s", settings_.team_station.c_str(), e.what());
+        }
+      };
+      try {
+        loadOnStart();
+      } catch (...) {
+        start_team();
+        throw;
+      }
+      start_team();
     };
     hooks.publish = [this](const ProcessedKeyframe& k) { publish(k); };
     hooks.wants_keypoints = [this] { return debug_pub_.getNumSubscribers() > 0; };
@@ -126,11 +142,12 @@ class LoopClosureNodelet : public nodelet::Nodelet {
           settings_.save_on_shutdown || settings_.load_on_start
               ? robots_.front()->store->directory() + "/" + settings_.team_station + ".team_ledger.json"
               : "";
-      team_link_ = std::make_unique<TeamLink>(nh, settings_, shared_, shared_.team->names(), ledger,
-                                              [this](size_t robot, const mild_lcd::LoopClosure::ConstPtr& msg) {
-                                                robots_.at(robot)->loop_pub.publish(msg);
-                                                if (all_pub_) all_pub_.publish(msg);
-                                              });
+      team_link_ = std::make_unique<TeamLink>(
+          nh, settings_, shared_, shared_.team->names(), ledger,
+          [this](const std::vector<size_t>& robots, const mild_lcd::LoopClosure::ConstPtr& msg) {
+            for (size_t robot : robots) robots_.at(robot)->loop_pub.publish(msg);
+            if (all_pub_) all_pub_.publish(msg);
+          });
       shared_.on_map_replaced = [this](size_t robot) { team_link_->mapReplaced(robot); };
       hooks.stored = [this](const mild::DetectionResult& result) { team_link_->stored(result); };
     }

@@ -27,6 +27,8 @@ constexpr size_t kMaxNameLength = 64;
 constexpr std::chrono::seconds kResendAfter{2};
 // Loops resent to one peer per heartbeat period, at most (after a long outage many wait).
 constexpr size_t kMaxResendsPerTick = 50;
+// Loops kept for a peer until it acknowledges them; beyond, its summaries wait.
+constexpr size_t kMaxUnacknowledged = 10000;
 
 template <class M>
 uint64_t bytesOf(const M& msg) {
@@ -103,16 +105,23 @@ void TeamLink::start() {
   features_sub_ = nh_.subscribe(topic(me, "features"), 100, &TeamLink::onFeaturesMsg, this, hints);
   loops_sub_ = nh_.subscribe(topic(me, "loops"), 1000, &TeamLink::onLoopMsg, this, hints);
   thread_ = std::thread([this] { run(); });
+  started_ = true;
 }
 
 void TeamLink::stop() {
   // Keyframes of peers waiting for their features were taken already: their loops would be lost
   // with a restart. Their answers are waited for a moment (a pull takes milliseconds on a live link).
+  // So are the acknowledgements of loops sent to connected peers (a restart forgets them).
   const auto deadline = Clock::now() + std::chrono::seconds(3);
   for (;;) {
     {
       std::lock_guard<std::mutex> guard(mutex_);
-      if (pending_.empty() || stopping_ || !thread_.joinable()) break;
+      draining_ = true;
+      bool waiting_for_acknowledgements = false;
+      for (const auto& [name, p] : peers_) {
+        waiting_for_acknowledgements = waiting_for_acknowledgements || (connected(p) && !p.unacknowledged.empty());
+      }
+      if ((pending_.empty() && !waiting_for_acknowledgements) || stopping_ || !thread_.joinable()) break;
       if (Clock::now() >= deadline) {
         ROS_WARN_STREAM("team link: stopping with " << pending_.size()
                                                     << " peer keyframes still waiting for their features: their loops, "
@@ -137,7 +146,7 @@ void TeamLink::stop() {
 }
 
 void TeamLink::save() {
-  if (ledger_path_.empty()) return;
+  if (ledger_path_.empty() || !started_) return;
   std::string text;
   {
     const auto lock = shared_.lock();
@@ -159,12 +168,26 @@ void TeamLink::save() {
 // --- this station's keyframes ---
 
 void TeamLink::stored(const mild::DetectionResult& result) {
+  if (!started_) return;                 // off: nothing numbered, nothing sent
   std::vector<std::string> unreachable;  // told in the summary: to them, its loops come late
   {
     std::lock_guard<std::mutex> guard(mutex_);
     for (const auto& [name, p] : peers_) {
       if (p.seen && !connected(p)) unreachable.push_back(name);
     }
+  }
+  // A peer that took more of our summaries than we numbered (this station crashed after its last
+  // save): the lost numbers are skipped, or the peer would take our next keyframes for copies.
+  uint64_t held = 0;
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    for (const auto& [name, p] : peers_) held = std::max(held, p.holds_ours);
+  }
+  if (held > ledger_.ownCount()) {
+    ROS_WARN_STREAM("team link: peers hold " << held << " of this station's summaries, its ledger "
+                                             << ledger_.ownCount() << " (a crash after the last save): numbering from "
+                                             << held);
+    ledger_.skipTo(held);
   }
   const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
   const mild_lcd::PlaceSummary::ConstPtr msg = summaryOf(seq);
@@ -192,7 +215,7 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
   const mild::KeyframeMap& map = shared_.robot(own.robot).map();
   // A map replaced since (a load, a reset) no longer holds it: the summary goes without
   // descriptors, so that the peer counts it and finds nothing in it.
-  if (const auto index = map.find(own.id)) {
+  if (const auto index = own.id == mild::StationLedger::kNoKeyframe ? std::nullopt : map.find(own.id)) {
     const mild::Features features = map.features(*index);
     msg->stamp = stampOf(map.record(*index).stamp);
     msg->session = map.record(*index).session;
@@ -241,6 +264,7 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
   const bool well_formed =
       width == static_cast<size_t>(descriptor_bytes_) && bytes <= kMaxMessageBytes &&
       msg->descriptors.size() % width == 0 && msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
+      msg->descriptors.size() <= 4 * static_cast<size_t>(settings_.team_summary_bytes) &&
       msg->known_stations.size() == msg->known_counts.size() && msg->known_stations.size() <= kMaxPeers + 1 &&
       msg->unreachable.size() <= kMaxPeers + 1 && !msg->robot.empty() && msg->robot.size() <= kMaxNameLength;
   if (!well_formed) {
@@ -261,7 +285,8 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
   // Late: sent to fill a gap, or stored by its station while it could not hear from this one.
   const bool late = backfill || std::find(msg->unreachable.begin(), msg->unreachable.end(), settings_.team_station) !=
                                     msg->unreachable.end();
-  p->waiting[msg->seq] = Waiting{msg, late};
+  Waiting& waiting = p->waiting[msg->seq];
+  waiting = Waiting{msg, late || waiting.late};
   wake_.notify_one();
 }
 
@@ -269,7 +294,8 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
   if (msg->station == settings_.team_station) return;
   std::lock_guard<std::mutex> guard(mutex_);
   Peer* p = peer(msg->station);
-  if (!p || msg->peers.size() != msg->received.size() || msg->peers.size() != msg->loops_received.size()) {
+  if (!p || msg->peers.size() != msg->received.size() || msg->peers.size() != msg->loops_received.size() ||
+      msg->loops_from.size() > msg->peers.size()) {
     if (p)
       ++p->refused;
     else
@@ -284,6 +310,8 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
   for (size_t i = 0; i < msg->peers.size(); ++i) {
     if (msg->peers[i] != settings_.team_station) continue;
     p->acknowledged = std::max(p->acknowledged, msg->loops_received[i]);
+    p->holds_ours = msg->received[i];
+    if (i < msg->loops_from.size()) p->loops_from = msg->loops_from[i];
   }
   while (!p->unacknowledged.empty() && p->unacknowledged.front().loop->seq < p->acknowledged) {
     p->unacknowledged.pop_front();
@@ -336,10 +364,22 @@ void TeamLink::run() {
       replies.swap(replies_);
       loops.swap(loops_);
     }
+    // One message that cannot be handled is counted; the others are handled still.
+    const auto guarded = [this](const auto& handle) {
+      try {
+        handle();
+      } catch (const std::exception& e) {
+        {
+          std::lock_guard<std::mutex> guard(mutex_);
+          ++refused_;
+        }
+        ROS_WARN_STREAM_THROTTLE(5.0, "team link: " << e.what());
+      }
+    };
     try {
-      for (const auto& r : requests) serve(r);
-      for (const auto& r : replies) onFeatures(r);
-      for (const auto& l : loops) onLoop(l);
+      for (const auto& r : requests) guarded([&] { serve(r); });
+      for (const auto& r : replies) guarded([&] { onFeatures(r); });
+      for (const auto& l : loops) guarded([&] { onLoop(l); });
       // A bounded batch, so that requests and replies are not starved by a long backlog.
       for (int i = 0; i < 50 && takeNextSummary(); ++i) {
       }
@@ -358,11 +398,14 @@ bool TeamLink::takeNextSummary() {
   Waiting next;
   {
     std::lock_guard<std::mutex> guard(mutex_);
+    if (draining_) return false;
     for (auto& [n, p] : peers_) {
       // A copy of one taken meanwhile (the broadcast and a gap's filling both brought it).
       while (!p.waiting.empty() && p.waiting.begin()->first < p.taken) p.waiting.erase(p.waiting.begin());
       if (p.waiting.empty() || p.waiting.begin()->first != p.taken || !p.compatible) continue;
+      // Backpressure: a peer that does not answer pulls or acknowledge loops is not given more.
       if (p.pending_pulls >= static_cast<size_t>(settings_.team_max_pending_pulls)) continue;
+      if (p.unacknowledged.size() >= kMaxUnacknowledged) continue;
       name = n;
       next = p.waiting.begin()->second;
       p.waiting.erase(p.waiting.begin());
@@ -456,7 +499,11 @@ void TeamLink::onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply) {
       p->feature_bytes_in += bytesOf(*reply);
       try {
         features = featuresFromMsg(reply->keyframe);
-        verify = features.descriptors.size() <= static_cast<size_t>(settings_.max_keyframe_features);
+        mild::checkCameraAndDepths(features);
+        verify = features.descriptors.size() <= static_cast<size_t>(settings_.max_keyframe_features) &&
+                 (features.declared_bytes == 0 || features.declared_bytes == descriptor_bytes_) &&
+                 std::all_of(features.descriptors.begin(), features.descriptors.end(),
+                             [&](const mild::Descriptor& d) { return d.bytes == descriptor_bytes_; });
       } catch (const std::exception&) {
         verify = false;
       }
@@ -493,10 +540,13 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     for (auto& c : msg->candidates) c.station = settings_.team_station;
     auto loop = boost::make_shared<mild_lcd::TeamLoop>();
     loop->decider = settings_.team_station;
-    loop->seq = ledger_.nextLoopFor(pending.peer);
     loop->loop = *msg;
     std::lock_guard<std::mutex> guard(mutex_);
     if (Peer* p = peer(pending.peer)) {
+      // The peer took more of our loops than our ledger numbered (we crashed after our last save):
+      // numbering goes on above them, or it would take our next loops for ones it published.
+      if (p->acknowledged > ledger_.loopsSentTo(pending.peer)) ledger_.skipLoopsTo(pending.peer, p->acknowledged);
+      loop->seq = ledger_.nextLoopFor(pending.peer);
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
       p->unacknowledged.push_back({loop, Clock::now()});
@@ -504,28 +554,45 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
       p->bytes_out += bytesOf(*loop);
     }
   }
-  for (size_t robot : robots) publish_(robot, msg);
+  publish_(robots, msg);
 }
 
 void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
   const size_t robot = robotIndex(loop->loop.query_robot);
-  if (robot >= robot_names_.size() || loop->loop.query_station != settings_.team_station ||
-      bytesOf(*loop) > kMaxMessageBytes) {
+  uint64_t loops_from = 0;
+  {
     std::lock_guard<std::mutex> guard(mutex_);
-    if (Peer* p = peer(loop->decider))
-      ++p->refused;
-    else
-      ++refused_;
-    return;
+    Peer* p = peer(loop->decider);  // only a peer's loops are taken: a name is not a ledger entry
+    if (!p || robot >= robot_names_.size() || loop->loop.query_station != settings_.team_station ||
+        bytesOf(*loop) > kMaxMessageBytes) {
+      if (p) {
+        ++p->refused;
+      } else {
+        ++refused_;
+      }
+      return;
+    }
+    loops_from = p->loops_from;
   }
   {
     const auto lock = shared_.lock();
     // In their order only: a later one is dropped and comes again (the decider resends until
-    // acknowledged), an earlier one was published already.
-    if (loop->seq != ledger_.loopsReceivedFrom(loop->decider)) return;
+    // acknowledged), an earlier one was published already. A decider that can no longer send the
+    // next one expected (it restarted, or crashed, with loops unacknowledged) is followed: those
+    // loops are lost, and counted.
+    uint64_t expected = ledger_.loopsReceivedFrom(loop->decider);
+    const uint64_t resumes = std::min(loops_from, loop->seq);
+    if (resumes > expected) {
+      {
+        std::lock_guard<std::mutex> guard(mutex_);
+        if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
+      }
+      for (; expected < resumes; ++expected) ledger_.tookLoop(loop->decider);
+    }
+    if (loop->seq != expected) return;
     ledger_.tookLoop(loop->decider);
   }
-  publish_(robot, boost::make_shared<const mild_lcd::LoopClosure>(loop->loop));
+  publish_({robot}, boost::make_shared<const mild_lcd::LoopClosure>(loop->loop));
 }
 
 size_t TeamLink::robotIndex(const std::string& name) const {
@@ -615,6 +682,8 @@ void TeamLink::tick() {
     status->peers.push_back(name);
     status->received.push_back(ledger_.received(name));
     status->loops_received.push_back(ledger_.loopsReceivedFrom(name));
+    status->loops_from.push_back(p.unacknowledged.empty() ? ledger_.loopsSentTo(name)
+                                                          : p.unacknowledged.front().loop->seq);
     status->summaries_in += p.summaries_in;
     status->summary_bytes_in += p.summary_bytes_in;
     status->features_in += p.features_in;
@@ -674,6 +743,7 @@ void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
     stat.add(name + ": loops decided", p.loops_decided);
     stat.add(name + ": loops found late after a reconnect", p.loops_found_late);
     stat.add(name + ": loops not yet acknowledged", p.unacknowledged.size());
+    stat.add(name + ": its loops lost to its restart", p.loops_lost);
     stat.add(name + ": refused", p.refused);
     stat.add(name + ": reconnects", p.reconnects);
   }

@@ -24,6 +24,7 @@
 //   ~team/max_requests_per_second requests from one peer are refused as busy; unknown keyframes
 //   get UNKNOWN. Every inbox is bounded.
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -54,8 +55,8 @@ namespace mild_lcd {
 
 class TeamLink {
  public:
-  // Publishes a loop on robot's loop_closure (and loop_closures_all).
-  using PublishLoop = std::function<void(size_t robot, const mild_lcd::LoopClosure::ConstPtr&)>;
+  // Publishes a loop on each of these robots' loop_closure (and once on loop_closures_all).
+  using PublishLoop = std::function<void(const std::vector<size_t>& robots, const mild_lcd::LoopClosure::ConstPtr&)>;
 
   // nh: the node's namespace handle (topics go under /mild_team/, absolute). ledger_path: where
   // the ledger is saved beside the maps (empty: never). Throws InvalidInput for a bad station name.
@@ -68,7 +69,8 @@ class TeamLink {
   void start();
   // Unsubscribes and joins the thread; what waits is kept in the ledger's counts (asked again).
   void stop();
-  // Writes the ledger (atomically) when a path was given. Under no lock; takes the detector's.
+  // Writes the ledger (atomically) when a path was given and the link started (a link that could
+  // not read its ledger never writes over it). Under no lock; takes the detector's.
   void save();
 
   // Under the detector lock, right after a keyframe was stored: numbered and summarised.
@@ -90,6 +92,8 @@ class TeamLink {
     bool compatible = true;                                  // its descriptors have this station's width
     uint64_t summaries = 0;                                  // it has numbered, by its last heartbeat
     uint64_t acknowledged = 0;                               // loops of ours it took, by its last heartbeat
+    uint64_t holds_ours = 0;                                 // our summaries it took, by its last heartbeat
+    uint64_t loops_from = 0;                                 // the lowest number of its loops for us it can still send
     std::chrono::steady_clock::time_point backfill_asked{};  // the last gap request
     uint64_t taken = 0;   // its summaries taken (the ledger's count, readable under mutex_)
     double tokens = 0.0;  // its requests' budget (refilled per second)
@@ -103,6 +107,7 @@ class TeamLink {
     size_t pending_pulls = 0;
     uint64_t summaries_in = 0, summary_bytes_in = 0, features_in = 0, feature_bytes_in = 0;
     uint64_t bytes_out = 0, loops_decided = 0, loops_found_late = 0, refused = 0, duplicates = 0, reconnects = 0;
+    uint64_t loops_lost = 0;  // its loops for us it could no longer send (its restart, or crash)
     ros::Publisher to_requests, to_summaries, to_features, to_loops;  // to its inbox
   };
   struct Pending {  // a peer's keyframe waiting for its features
@@ -155,6 +160,7 @@ class TeamLink {
   std::mutex mutex_;  // everything below; never held while taking the detector lock
   std::condition_variable wake_;
   bool stopping_ = false;
+  bool draining_ = false;  // stop(): no more peer keyframes taken, the open pulls answered
   std::map<std::string, Peer> peers_;
   std::deque<mild_lcd::TeamRequest::ConstPtr> requests_;
   std::deque<mild_lcd::TeamFeatures::ConstPtr> replies_;
@@ -168,6 +174,7 @@ class TeamLink {
   ros::Publisher summaries_pub_, status_pub_;
   ros::Subscriber summaries_sub_, backfill_sub_, status_sub_, requests_sub_, features_sub_, loops_sub_;
   std::thread thread_;
+  std::atomic<bool> started_{false};  // start() succeeded: keyframes are numbered, the ledger saved
 };
 
 }  // namespace mild_lcd
