@@ -18,6 +18,7 @@
 #include "mild_lcd/detector/robot_team.hpp"
 #include "mild_lcd/features/feature_source.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "sample_halves.hpp"
 #include "test_images.hpp"
 
 namespace mild {
@@ -29,24 +30,8 @@ constexpr int kHalf = 150;
 
 const std::vector<cv::Mat>& frames() { return test::sampleFrames(); }
 
-// The ground truth's pairs from the second half to the first (the robots' shared places).
-GroundTruth acrossHalves() {
-  const GroundTruth all = loadGroundTruth(kSample + "/gt_loops.txt", kFrames);
-  GroundTruth truth;
-  for (const auto& p : all.right) {
-    if (p.first >= kHalf && p.second < kHalf) {
-      truth.right.insert(p);
-      truth.loop_queries.insert(p.first);
-    }
-  }
-  for (const auto& p : all.dont_care) {
-    if (p.first >= kHalf && p.second < kHalf) truth.dont_care.insert(p);
-  }
-  return truth;
-}
-
 TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
-  const GroundTruth truth = acrossHalves();
+  const GroundTruth truth = test::sampleAcrossHalves();
   ASSERT_GT(truth.loop_queries.size(), 10u);
 
   // One robot over the whole sample: its candidates from the second half into the first.
@@ -104,7 +89,7 @@ TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
 // same frames mirrored: other places). A revisit lasts many keyframes, so most of its keyframes'
 // loops are still found: measured against asking every map.
 TEST(RobotTeam, FindsTheLoopsIntoAMapAskedInTurn) {
-  const GroundTruth truth = acrossHalves();
+  const GroundTruth truth = test::sampleAcrossHalves();
   Metrics all_queries[2], asking_queries[2];
   size_t asking = 0;
   for (const int per_keyframe : {0, 1}) {

@@ -22,6 +22,7 @@
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/team/place_summary.hpp"
 #include "mild_lcd/team/station_ledger.hpp"
+#include "sample_halves.hpp"
 #include "test_images.hpp"
 
 namespace mild {
@@ -264,21 +265,6 @@ TEST(PlaceSummary, CarriesTheStrongestDescriptorsInTheKeyframesOrder) {
 constexpr int kFrames = 300;
 constexpr int kHalf = 150;
 
-GroundTruth acrossHalves() {
-  const GroundTruth all = loadGroundTruth(test::kSampleDir + "/gt_loops.txt", kFrames);
-  GroundTruth truth;
-  for (const auto& p : all.right) {
-    if (p.first >= kHalf && p.second < kHalf) {
-      truth.right.insert(p);
-      truth.loop_queries.insert(p.first);
-    }
-  }
-  for (const auto& p : all.dont_care) {
-    if (p.first >= kHalf && p.second < kHalf) truth.dont_care.insert(p);
-  }
-  return truth;
-}
-
 struct Decisions {
   std::set<int> found;  // queries (second half) with an accepted true loop into the first half
   size_t wrong = 0;     // accepted loops that are not true
@@ -309,7 +295,7 @@ void judgeAccepted(const GroundTruth& truth, int query, const std::vector<LoopCa
 // Against one node serving both robots: every loop it accepts between them is accepted, and none it
 // would call wrong. Also measures what smaller summaries keep (docs/multi_robot.md).
 TEST(Stations, TwoStationsFindTheLoopsBetweenTheirRobotsAsOneNodeServingBothDoes) {
-  const GroundTruth truth = acrossHalves();
+  const GroundTruth truth = test::sampleAcrossHalves();
   const DetectorParams params;
   const FeatureFrontEnd front_end(params.features);
   std::vector<Features> features;

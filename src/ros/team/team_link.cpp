@@ -318,35 +318,22 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
   }
 }
 
-void TeamLink::onRequest(const mild_lcd::TeamRequest::ConstPtr& msg) {
+template <class Ptr>
+void TeamLink::queue(std::deque<Ptr>& inbox, const Ptr& msg) {
   std::lock_guard<std::mutex> guard(mutex_);
-  if (requests_.size() >= kMaxInbox) {
+  if (inbox.size() >= kMaxInbox) {
     ++refused_;
     return;
   }
-  requests_.push_back(msg);
+  inbox.push_back(msg);
   wake_.notify_one();
 }
 
-void TeamLink::onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg) {
-  std::lock_guard<std::mutex> guard(mutex_);
-  if (replies_.size() >= kMaxInbox) {
-    ++refused_;
-    return;
-  }
-  replies_.push_back(msg);
-  wake_.notify_one();
-}
+void TeamLink::onRequest(const mild_lcd::TeamRequest::ConstPtr& msg) { queue(requests_, msg); }
 
-void TeamLink::onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg) {
-  std::lock_guard<std::mutex> guard(mutex_);
-  if (loops_.size() >= kMaxInbox) {
-    ++refused_;
-    return;
-  }
-  loops_.push_back(msg);
-  wake_.notify_one();
-}
+void TeamLink::onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg) { queue(replies_, msg); }
+
+void TeamLink::onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg) { queue(loops_, msg); }
 
 // --- the link's thread ---
 

@@ -137,6 +137,9 @@ class TeamLink {
   void onRequest(const mild_lcd::TeamRequest::ConstPtr& msg);
   void onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg);
   void onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg);
+  // Into a bounded inbox for the link's thread; a full one refuses (counted).
+  template <class Ptr>
+  void queue(std::deque<Ptr>& inbox, const Ptr& msg);
 
   // Under mutex_: the peer by name, made on first sight (at most kMaxPeers), or nullptr.
   Peer* peer(const std::string& name);
