@@ -86,7 +86,8 @@ TEST(Parameters, DefaultYamlDocumentsEveryParameterWithItsBuiltInDefault) {
 }
 
 // The shipped presets load and validate, and say what they change: the most accurate one on real
-// frames is AKAZE with nothing else changed (docs/accuracy.md, the cost-accuracy frontier).
+// frames is AKAZE with nothing else changed, the one within a keyframe's budget AKAZE on capped
+// frames (docs/accuracy.md, the cost-accuracy frontier).
 TEST(Parameters, ShippedPresetsLoadAndChangeWhatTheySay) {
   const DetectorParams accurate =
       loadDetectorParams(YamlParameterSource::fromFile(configPath("real_cameras_accurate.yaml")));
@@ -95,6 +96,12 @@ TEST(Parameters, ShippedPresetsLoadAndChangeWhatTheySay) {
   DetectorParams expected;
   expected.features.type = "akaze";
   EXPECT_EQ(describeParameters(accurate), describeParameters(expected)) << "the descriptor alone changes";
+  // Within a keyframe's budget: AKAZE on frames capped at 320 x 180.
+  const DetectorParams budget =
+      loadDetectorParams(YamlParameterSource::fromFile(configPath("real_cameras_budget.yaml")));
+  EXPECT_NO_THROW(budget.validate());
+  expected.features.max_pixels = 320.0 * 180.0;
+  EXPECT_EQ(describeParameters(budget), describeParameters(expected)) << "the descriptor and the cap alone change";
   const DetectorParams camera = loadDetectorParams(YamlParameterSource::fromFile(configPath("bench_camera.yaml")));
   EXPECT_NO_THROW(camera.validate());
 }

@@ -27,6 +27,12 @@ struct Features {
   // The descriptor width the sender declared (a Keyframe's descriptor_bytes), 0 when none: checked
   // against the database's even when there are no descriptors to check.
   int declared_bytes = 0;
+  // Pixels of the frame per pixel of the image the keypoints were detected in: 1, or 1/s when
+  // features/max_pixels shrank the frame by s before extraction (the keypoints are then mapped back
+  // to the frame's pixels). Such keypoints are placed 1/s less precisely, and verification widens
+  // its pixel tolerances by as much. Kept in memory only: a Keyframe message, a map file or a team
+  // peer's features carry none (1).
+  float detection_scale = 1.0f;
 };
 
 // The depths a keypoint may have: 1 cm to 10 km. Closer than any camera focuses, or farther than

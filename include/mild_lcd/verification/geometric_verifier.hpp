@@ -117,12 +117,18 @@ class GeometricVerifier : public CandidateVerifier {
                      std::vector<FeatureMatch> matches) const;
 
  private:
+  // pixel_scale widens the inlier tolerances (verification/ransac_threshold, pnp_threshold), which
+  // are in the pixels keypoints were detected in: detectionScale.
   GeometricCheck fitViews(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
-                          const CameraIntrinsics& query_camera, const CameraIntrinsics& train_camera,
-                          const std::vector<float>& query_depths, std::vector<FeatureMatch> matches) const;
+                          double pixel_scale, const CameraIntrinsics& query_camera,
+                          const CameraIntrinsics& train_camera, const std::vector<float>& query_depths,
+                          std::vector<FeatureMatch> matches) const;
   // The sparse match alone, after checking that each side has one keypoint per descriptor.
   static std::vector<FeatureMatch> matchWith(SparseMatcher& matcher, const Features& query, const Features& candidate);
   GeometricCheck checkWith(SparseMatcher& matcher, const Features& query, const Features& candidate) const;
+  // The coarser side's Features::detection_scale (at least 1): a keypoint found on an image shrunk by
+  // s is placed 1/s less precisely in the frame, so the tolerances widen by 1/s.
+  static double detectionScale(const Features& query, const Features& train);
 
   VerificationParams params_;
   // Reusable buffers, the first for check() and verify(), one per candidate in verifyAll(); the

@@ -1,8 +1,10 @@
 #include "mild_lcd/features/feature_source.hpp"
 
 #include <string>
+#include <utility>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/resolution_cap.hpp"
 
 namespace mild {
 
@@ -33,6 +35,7 @@ std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const FeatureParams& para
     using E = typename decltype(entry)::type;
     extractor = std::make_unique<E>(params.section<typename E::Params>(), params.reference_pixels);
   });
+  if (params.max_pixels > 0.0) extractor = std::make_unique<ResolutionCap>(std::move(extractor), params.max_pixels);
   return extractor;
 }
 

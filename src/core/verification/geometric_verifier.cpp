@@ -132,14 +132,19 @@ GeometricCheck GeometricVerifier::fit(const Features& query, const Features& tra
   const auto resolve = [&](const CameraIntrinsics& own, const CameraIntrinsics& other) {
     return own.known() ? own : configured.known() ? configured : other;
   };
-  return fitViews(query.keypoints, train.keypoints, resolve(query.camera, train.camera),
+  return fitViews(query.keypoints, train.keypoints, detectionScale(query, train), resolve(query.camera, train.camera),
                   resolve(train.camera, query.camera), query.depths, std::move(matches));
+}
+
+double GeometricVerifier::detectionScale(const Features& query, const Features& train) {
+  const auto scale = [](float s) { return std::isfinite(s) && s > 1.0f ? static_cast<double>(s) : 1.0; };
+  return std::max(scale(query.detection_scale), scale(train.detection_scale));
 }
 
 GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,
                                       std::vector<FeatureMatch> matches) const {
   const CameraIntrinsics configured = params_.intrinsics();
-  return fitViews(query, train, configured, configured, {}, std::move(matches));
+  return fitViews(query, train, 1.0, configured, configured, {}, std::move(matches));
 }
 
 namespace {
@@ -194,7 +199,7 @@ void orderByDistance(std::vector<FeatureMatch>& matches, std::vector<cv::Point2f
 // degenerate input (e.g. all points identical).
 cv::Mat fitTwoViewModel(const std::vector<cv::Point2f>& p1, const std::vector<cv::Point2f>& p2,
                         const CameraIntrinsics& query_camera, const CameraIntrinsics& train_camera,
-                        const VerificationParams& params, cv::Mat& mask) {
+                        const VerificationParams& params, double tolerance_px, cv::Mat& mask) {
   const bool essential = query_camera.known() && train_camera.known();
   // Two different cameras (e.g. two robots): fit E to normalised image coordinates, with the
   // threshold scaled as OpenCV does for one camera (by the mean focal length).
@@ -205,13 +210,11 @@ cv::Mat fitTwoViewModel(const std::vector<cv::Point2f>& p1, const std::vector<cv
   try {
     if (two_cameras) {
       model = cv::findEssentialMat(normalised(p1, query_camera), normalised(p2, train_camera), cv::Matx33d::eye(),
-                                   method, params.confidence, params.ransac_threshold / mean_focal, mask);
+                                   method, params.confidence, tolerance_px / mean_focal, mask);
     } else if (essential) {
-      model =
-          cv::findEssentialMat(p1, p2, query_camera.matrix(), method, params.confidence, params.ransac_threshold, mask);
+      model = cv::findEssentialMat(p1, p2, query_camera.matrix(), method, params.confidence, tolerance_px, mask);
     } else {
-      model = cv::findFundamentalMat(p1, p2, method, params.ransac_threshold, params.confidence, params.max_iterations,
-                                     mask);
+      model = cv::findFundamentalMat(p1, p2, method, tolerance_px, params.confidence, params.max_iterations, mask);
     }
   } catch (const cv::Exception&) {
     model.release();
@@ -222,10 +225,12 @@ cv::Mat fitTwoViewModel(const std::vector<cv::Point2f>& p1, const std::vector<cv
 }  // namespace
 
 GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& query,
-                                           const std::vector<cv::KeyPoint>& train, const CameraIntrinsics& query_camera,
-                                           const CameraIntrinsics& train_camera, const std::vector<float>& query_depths,
+                                           const std::vector<cv::KeyPoint>& train, double pixel_scale,
+                                           const CameraIntrinsics& query_camera, const CameraIntrinsics& train_camera,
+                                           const std::vector<float>& query_depths,
                                            std::vector<FeatureMatch> matches) const {
   GeometricCheck out;
+  const double tolerance_px = params_.ransac_threshold * pixel_scale;
   out.verification.attempted = true;
   out.verification.matches = static_cast<int>(matches.size());
   out.matches = std::move(matches);
@@ -235,7 +240,7 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   matchedPoints(query, train, out.matches, p1, p2);
   if (robustMethodFlag(params_.method) == cv::USAC_PROSAC) orderByDistance(out.matches, p1, p2);
   cv::Mat mask;
-  out.model = fitTwoViewModel(p1, p2, query_camera, train_camera, params_, mask);
+  out.model = fitTwoViewModel(p1, p2, query_camera, train_camera, params_, tolerance_px, mask);
   if (out.model.empty() || out.model.rows != 3 || mask.empty()) {
     out.model.release();
     return out;
@@ -259,9 +264,8 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   const bool essential = query_camera.known() && train_camera.known();
   // The inliers against chance: the fit's tolerance in pixels over the area either image's keypoints
   // occupy, for the model's minimal sample.
-  const double chance = (chanceInlierProbability(query, params_.ransac_threshold) +
-                         chanceInlierProbability(train, params_.ransac_threshold)) /
-                        2.0;
+  const double chance =
+      (chanceInlierProbability(query, tolerance_px) + chanceInlierProbability(train, tolerance_px)) / 2.0;
   out.verification.log10_false_alarms =
       log10FalseAlarms(out.verification.matches, inliers, chance, essential ? kEssentialSample : kFundamentalSample);
   out.verification.verified = inliers >= params_.min_inliers;
@@ -273,7 +277,7 @@ GeometricCheck GeometricVerifier::fitViews(const std::vector<cv::KeyPoint>& quer
   if (!essential) return out;
   if (!depth_in.empty()) {
     out.verification.pose = relativePoseFromDepth(q_in, depth_in, t_in, query_camera.matrix(), train_camera.matrix(),
-                                                  params_.pnp_threshold, params_.min_inliers);
+                                                  params_.pnp_threshold * pixel_scale, params_.min_inliers);
   }
   if (!out.verification.pose.valid) {  // no depth, or too little of it: the direction of the baseline
     const bool two_cameras = query_camera != train_camera;
