@@ -82,6 +82,16 @@ TEST(ResolutionCap, VerificationWidensItsToleranceByTheShrink) {
   EXPECT_LT(unwidened, widened * 0.8) << "a quarter-size keypoint is not placed within 1 frame pixel";
 }
 
+// A frame a pixel thin shrinks to nothing a detector can use: no features, no failure.
+TEST(ResolutionCap, AThinFrameYieldsNoFeaturesAndNoError) {
+  const cv::Mat thin(1, 200000, CV_8UC1, cv::Scalar(128));
+  for (const char* type : {"orb", "brisk", "akaze"}) {
+    Features f;
+    EXPECT_NO_THROW(f = makeFeatureExtractor(capped(type, 4096.0))->extract(thin, PixelFormat::kGray)) << type;
+    EXPECT_TRUE(f.keypoints.empty()) << type;
+  }
+}
+
 TEST(ResolutionCap, ACapBelow64By64IsRefused) {
   EXPECT_THROW(makeFeatureExtractor(capped("orb", 1000.0)), InvalidInput);
   EXPECT_THROW(makeFeatureExtractor(capped("orb", -1.0)), InvalidInput);
