@@ -68,9 +68,9 @@ TEST(ResolutionCap, VerificationWidensItsToleranceByTheShrink) {
   const cv::Mat& b = test::sampleFrames().at(33);
   const GeometricVerifier verifier{VerificationParams{}};
   const auto extractor_small = makeFeatureExtractor(capped("orb", 0.0));
-  const int small = verifier.verify(extractor_small->extract(a, PixelFormat::kGray),
-                                    extractor_small->extract(b, PixelFormat::kGray))
-                        .inliers;
+  const int small =
+      verifier.verify(extractor_small->extract(a, PixelFormat::kGray), extractor_small->extract(b, PixelFormat::kGray))
+          .inliers;
   const auto extractor_capped = makeFeatureExtractor(capped("orb", 320.0 * 240.0));
   Features qa = extractor_capped->extract(enlarged(a, 4.0), PixelFormat::kGray);
   Features qb = extractor_capped->extract(enlarged(b, 4.0), PixelFormat::kGray);
