@@ -43,7 +43,7 @@ ROWS = {
     "features/type akaze": "features:\n  type: akaze\n",
     "akaze, octaves 2": "features:\n  type: akaze\nakaze:\n  octaves: 2\n",
     # features/max_pixels: frames larger than the cap shrunk before extraction (640 x 360 to 320 x 180 and
-    # 369 x 208; the renders' 320 x 240 only by the smaller cap, to 277 x 208).
+    # 369 x 207; the renders' 320 x 240 only by the smaller cap, to 277 x 207).
     "akaze max_pixels 57600": "features:\n  type: akaze\n  max_pixels: 57600\n",
     "akaze max_pixels 76800": "features:\n  type: akaze\n  max_pixels: 76800\n",
 }

@@ -13,11 +13,11 @@ namespace mild {
 // The names features/type accepts (FeatureExtractors' entries).
 const std::vector<std::string>& featureTypes();
 
-// The feature source of a detector: `type` names the extractor (features/type), whose own
-// parameters sit in its section (`extractors`: one per FeatureExtractors entry).
 // The smallest features/max_pixels (64 x 64): below it detectors find next to nothing.
 constexpr double kMinCappedPixels = 4096.0;
 
+// The feature source of a detector: `type` names the extractor (features/type), whose own
+// parameters sit in its section (`extractors`: one per FeatureExtractors entry).
 struct FeatureParams {
   std::string type = "orb";
   int descriptor_bytes = 0;
@@ -42,11 +42,11 @@ struct FeatureParams {
       "360, 1,600 on 640 x 480. On real 640 x 360 frames 800 features found a true candidate among the best "
       "three for 80 of 100 queries and 1,500 for 87 (docs/accuracy.md). 0 = num_features at any size.");
     v("max_pixels", p.max_pixels, Bounds::atLeast(kMinCappedPixels).orZero(),
-      "Frames with more pixels are shrunk to this many before extraction (keypoints mapped back to the frame's "
-      "pixels, verification tolerances widened to match), so that a large camera costs what this size costs; "
-      "num_features then follows the shrunk size. 0 = every frame at its own size. "
-      "config/real_cameras_budget.yaml uses 57,600 (320 x 180) with AKAZE: on real 640 x 360 frames day recall "
-      "of full-size AKAZE at about ORB's cost, less at night (docs/accuracy.md).");
+      "Frames with more pixels are shrunk to at most this many before extraction (keypoints mapped back to the "
+      "frame's pixels, the fit's inlier tolerances widened by the shrink), so that a large camera costs what this "
+      "size costs; num_features then follows the shrunk size. 0 = every frame at its own size. "
+      "config/real_cameras_budget.yaml uses 57,600 (320 x 180) with AKAZE: on real 640 x 360 frames, every "
+      "frame, the day accuracy of full-size AKAZE at about ORB's cost; less at night (docs/accuracy.md).");
   }
 
   // An extractor's section, e.g. section<OrbParams>().num_features.

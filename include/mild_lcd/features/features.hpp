@@ -30,8 +30,9 @@ struct Features {
   // Pixels of the frame per pixel of the image the keypoints were detected in: 1, or 1/s when
   // features/max_pixels shrank the frame by s before extraction (the keypoints are then mapped back
   // to the frame's pixels). Such keypoints are placed 1/s less precisely, and verification widens
-  // its pixel tolerances by as much. Kept in memory only: a Keyframe message, a map file or a team
-  // peer's features carry none (1).
+  // its pixel tolerances by the coarser side's scale. Kept in memory only (the map keeps a stored
+  // keyframe's while it runs): a Keyframe message, a map file and a team peer's pulled features
+  // carry none (1), so a peer's capped keyframe is judged at the deciding station's own scale.
   float detection_scale = 1.0f;
 };
 

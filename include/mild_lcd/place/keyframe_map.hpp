@@ -30,6 +30,10 @@ struct KeyframeRecord {
   uint32_t session = 0;
   std::vector<cv::KeyPoint> keypoints;
   CameraIntrinsics camera;  // unknown unless the keyframe brought them
+  // Its Features::detection_scale, so that verifying against it widens the tolerance for it too
+  // (a stored keyframe as a SparseMatch side, a pulled peer's query against it). In memory only:
+  // a map file does not save it, and a loaded keyframe is 1.
+  float detection_scale = 1.0f;
 };
 
 // Everything a map holds, as plain data: what database_file.hpp saves and loads.
@@ -128,7 +132,7 @@ class KeyframeMap {
   // Stores a keyframe whose id was checked (checkId) and whose descriptors fit (checkRoomFor);
   // returns its index. Cannot fail for a checked keyframe.
   KeyframeIndex add(uint64_t id, double stamp, std::vector<cv::KeyPoint> keypoints, const DescriptorList& descriptors,
-                    const CameraIntrinsics& camera);
+                    const CameraIntrinsics& camera, float detection_scale = 1.0f);
 
   // --- Replacing ---------------------------------------------------------------------------------
   void reset();

@@ -228,8 +228,8 @@ DetectionResult LoopDetector::process(Observation observation, const std::vector
   // Stored last: the query is never its own candidate, and a refusal above changes nothing.
   start = Clock::now();
   result.query_session = map_.session();
-  result.query_index =
-      map_.add(result.query_id, stamp, std::move(features.keypoints), features.descriptors, features.camera);
+  result.query_index = map_.add(result.query_id, stamp, std::move(features.keypoints), features.descriptors,
+                                features.camera, features.detection_scale);
   result.stats.query_ms += msSince(start);
   result.similarity = std::move(own.query.similarity);
   return result;

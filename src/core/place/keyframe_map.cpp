@@ -44,7 +44,9 @@ std::optional<KeyframeIndex> KeyframeMap::find(uint64_t id) const {
 }
 
 Features KeyframeMap::features(KeyframeIndex k) const {
-  return Features{contents_.records[k].keypoints, contents_.database.descriptors(k), contents_.records[k].camera, {}};
+  Features out{contents_.records[k].keypoints, contents_.database.descriptors(k), contents_.records[k].camera, {}};
+  out.detection_scale = contents_.records[k].detection_scale;
+  return out;
 }
 
 size_t KeyframeMap::memoryBytes() const {
@@ -86,10 +88,12 @@ void KeyframeMap::checkId(std::optional<uint64_t> id) const {
 }
 
 KeyframeIndex KeyframeMap::add(uint64_t id, double stamp, std::vector<cv::KeyPoint> keypoints,
-                               const DescriptorList& descriptors, const CameraIntrinsics& camera) {
+                               const DescriptorList& descriptors, const CameraIntrinsics& camera,
+                               float detection_scale) {
   contents_.database.insert(descriptors);
   const auto index = static_cast<KeyframeIndex>(contents_.records.size());
-  contents_.records.push_back(KeyframeRecord{id, stamp, contents_.session, std::move(keypoints), camera});
+  contents_.records.push_back(
+      KeyframeRecord{id, stamp, contents_.session, std::move(keypoints), camera, detection_scale});
   contents_.index_of_id.emplace(id, index);
   contents_.next_id = std::max(contents_.next_id, id + 1);
   contents_.clock.add(stamp);

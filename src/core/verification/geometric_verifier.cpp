@@ -137,7 +137,10 @@ GeometricCheck GeometricVerifier::fit(const Features& query, const Features& tra
 }
 
 double GeometricVerifier::detectionScale(const Features& query, const Features& train) {
-  const auto scale = [](float s) { return std::isfinite(s) && s > 1.0f ? static_cast<double>(s) : 1.0; };
+  // Within [1, kMaxDetectionScale]: a caller's absurd scale must not make every match an inlier.
+  const auto scale = [](float s) {
+    return std::isfinite(s) && s > 1.0f ? std::min(static_cast<double>(s), kMaxDetectionScale) : 1.0;
+  };
   return std::max(scale(query.detection_scale), scale(train.detection_scale));
 }
 
