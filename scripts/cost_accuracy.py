@@ -47,8 +47,6 @@ ROWS = {
     "akaze max_pixels 57600": "features:\n  type: akaze\n  max_pixels: 57600\n",
     "akaze max_pixels 76800": "features:\n  type: akaze\n  max_pixels: 76800\n",
 }
-# Rows that also change mild_offline's arguments.
-ROW_ARGS = {}
 FRONTIER = ["default", "orb/num_features 1500", "orb/num_features 3000", "features/type brisk", "features/type akaze",
             "akaze, octaves 2", "akaze max_pixels 57600", "akaze max_pixels 76800"]
 STAGES = ["extract_ms", "query_ms", "filter_ms", "verify_ms", "keyframe_ms", "keyframe_cpu_ms"]
@@ -66,7 +64,6 @@ def run(offline, out, row, yaml_text, name, folder):
            os.path.join(folder, "gt_loops.txt"), "--min-gap", "40", "--stats", stats]
     if yaml_text:
         cmd += ["--config", config]
-    cmd += ROW_ARGS.get(row.replace(" (again)", ""), [])
     text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     recall = float(re.search(r"recall@100%P: ([0-9.]+)", text).group(1))
     ap = float(re.search(r"average precision: ([0-9.]+)", text).group(1))
