@@ -9,9 +9,10 @@
 #   ROWS="default,verification/method usac" ./scripts/bench_cost.sh
 #   SEQUENCES="name=folder name=folder" ./scripts/bench_cost.sh   # other sequences (names gp_* count as real)
 #   ROWS=frontier ./scripts/bench_cost.sh   # the cost-accuracy frontier of docs/accuracy.md: ORB at 800 / 1,500 /
-#                                           # 3,000 features, BRISK, AKAZE (also 2 octaves, and frames capped at
-#                                           # 57,600 and 76,800 pixels) on the real sequences at keyframe steps 1
-#                                           # and 2 and the public ones at step 5
+#                                           # 3,000 features, BRISK, AKAZE (also 2 octaves, frames capped at
+#                                           # 57,600 and 76,800 pixels, and the budget preset: capped at 76,800
+#                                           # with one sub-level per octave) on the real sequences at keyframe
+#                                           # steps 1 and 2 and the public ones at step 5
 set -eo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 

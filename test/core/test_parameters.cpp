@@ -87,7 +87,7 @@ TEST(Parameters, DefaultYamlDocumentsEveryParameterWithItsBuiltInDefault) {
 
 // The shipped presets load and validate, and say what they change: the most accurate one on real
 // frames is AKAZE with nothing else changed, the one within a keyframe's budget AKAZE on capped
-// frames (docs/accuracy.md, the cost-accuracy frontier).
+// frames with a cheaper scale space (docs/accuracy.md, the cost-accuracy frontier).
 TEST(Parameters, ShippedPresetsLoadAndChangeWhatTheySay) {
   const DetectorParams accurate =
       loadDetectorParams(YamlParameterSource::fromFile(configPath("real_cameras_accurate.yaml")));
@@ -96,12 +96,14 @@ TEST(Parameters, ShippedPresetsLoadAndChangeWhatTheySay) {
   DetectorParams expected;
   expected.features.type = "akaze";
   EXPECT_EQ(describeParameters(accurate), describeParameters(expected)) << "the descriptor alone changes";
-  // Within a keyframe's budget: AKAZE on frames capped at 320 x 180.
+  // Within a keyframe's budget: AKAZE on frames capped at 320 x 240, one sub-level per octave.
   const DetectorParams budget =
       loadDetectorParams(YamlParameterSource::fromFile(configPath("real_cameras_budget.yaml")));
   EXPECT_NO_THROW(budget.validate());
-  expected.features.max_pixels = 320.0 * 180.0;
-  EXPECT_EQ(describeParameters(budget), describeParameters(expected)) << "the descriptor and the cap alone change";
+  expected.features.max_pixels = 320.0 * 240.0;
+  expected.features.section<AkazeParams>().octave_layers = 1;
+  EXPECT_EQ(describeParameters(budget), describeParameters(expected))
+      << "the descriptor, the cap and AKAZE's sub-levels alone change";
   const DetectorParams camera = loadDetectorParams(YamlParameterSource::fromFile(configPath("bench_camera.yaml")));
   EXPECT_NO_THROW(camera.validate());
 }

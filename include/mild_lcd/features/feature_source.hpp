@@ -45,8 +45,9 @@ struct FeatureParams {
       "Frames with more pixels are shrunk to at most this many before extraction (keypoints mapped back to the "
       "frame's pixels, the fit's inlier tolerances widened by the shrink), so that a large camera costs what this "
       "size costs; num_features then follows the shrunk size. 0 = every frame at its own size. "
-      "config/real_cameras_budget.yaml uses 57,600 (320 x 180) with AKAZE: on real 640 x 360 frames, every "
-      "frame, the day accuracy of full-size AKAZE at about ORB's cost; less at night (docs/accuracy.md).");
+      "config/real_cameras_budget.yaml uses 76,800 (320 x 240) with AKAZE at one sub-level per octave: on real "
+      "640 x 360 frames, every frame, more than the day accuracy of full-size AKAZE at about ORB's cost; less at "
+      "night (docs/accuracy.md).");
   }
 
   // An extractor's section, e.g. section<OrbParams>().num_features.
