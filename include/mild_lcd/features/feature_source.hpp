@@ -46,8 +46,8 @@ struct FeatureParams {
       "frame's pixels, the fit's inlier tolerances widened by the shrink), so that a large camera costs what this "
       "size costs; num_features then follows the shrunk size. 0 = every frame at its own size. "
       "config/real_cameras_budget.yaml uses 76,800 (320 x 240) with AKAZE at one sub-level per octave: on real "
-      "640 x 360 frames, every frame, more than the day accuracy of full-size AKAZE at about ORB's cost; less at "
-      "night (docs/accuracy.md).");
+      "640 x 360 frames the day accuracy of full-size AKAZE, and more at night than ORB's, at about ORB's cost "
+      "(docs/accuracy.md).");
   }
 
   // An extractor's section, e.g. section<OrbParams>().num_features.
