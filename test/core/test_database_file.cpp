@@ -7,6 +7,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 
 #include <zlib.h>
@@ -168,15 +169,19 @@ TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
   process(source, 0, 3);
   saveMap(source.map(), path("map.mild"));
   std::vector<uint8_t> data = bytes(path("map.mild"));
-  data[8] = 4;  // format version 4, with a header checksum that matches it
+  const uint32_t newer = kDatabaseFormatVersion + 1;
+  std::memcpy(data.data() + 8, &newer, 4);  // with a header checksum that matches it
   const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
   std::memcpy(data.data() + 28, &header_crc, 4);
-  write(path("v4.mild"), data);
+  write(path("newer.mild"), data);
   try {
-    readMapFile(path("v4.mild"));
-    FAIL() << "read a version-4 file";
+    readMapFile(path("newer.mild"));
+    FAIL() << "read a version-" << newer << " file";
   } catch (const InvalidInput& e) {
-    EXPECT_NE(std::string(e.what()).find("format version 4; this mild_lcd reads versions 1 to 3"), std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find("format version " + std::to_string(newer) + "; this mild_lcd reads versions 1 to " +
+                                   std::to_string(kDatabaseFormatVersion)),
+        std::string::npos)
         << e.what();
   }
 }
@@ -194,14 +199,14 @@ TEST_F(DatabaseFile, EachKeyframesCameraIsKept) {
   EXPECT_FALSE(state.records[1].camera.known());
 }
 
-// A version-2 file (written before keyframes had cameras) loads as keyframes without intrinsics.
-// It is made from a version-3 file by removing the four doubles each keyframe record gained.
-TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
-  LoopDetector source(fixtureParams());
-  process(source, 0, 4);
-  saveMap(source.map(), path("map.mild"));
-  const std::vector<uint8_t> v3 = bytes(path("map.mild"));
-  std::vector<uint8_t> payload(v3.begin() + 32, v3.end());
+// A file of an earlier format version made from a current one: each keyframe record loses what later
+// versions added after its id, stamp and session (version 3 its detection scale, version 2 its
+// camera intrinsics as well), and the header and checksums are made to match. ORB's 32-byte
+// descriptors.
+std::vector<uint8_t> earlierVersion(const std::vector<uint8_t>& current, uint32_t version) {
+  std::vector<uint8_t> payload(current.begin() + 32, current.end());
+  const size_t removed = version == 3 ? 4 : 4 + 32;
+  const size_t kept = version == 3 ? 32 : 0;  // the camera, before the scale
   size_t at = 0;
   const auto u32 = [&](size_t pos) {
     uint32_t v;
@@ -213,20 +218,29 @@ TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
   const uint32_t keyframes = u32(at);
   at += 4;
   for (uint32_t k = 0; k < keyframes; ++k) {
-    at += 8 + 8 + 4;  // id, stamp, session
-    payload.erase(payload.begin() + static_cast<long>(at), payload.begin() + static_cast<long>(at + 32));
+    at += 8 + 8 + 4 + kept;  // id, stamp, session (and the camera, kept)
+    payload.erase(payload.begin() + static_cast<long>(at), payload.begin() + static_cast<long>(at + removed));
     at += 4 + u32(at) * (24 + 32);  // keypoints and descriptors
   }
-  std::vector<uint8_t> v2(v3.begin(), v3.begin() + 32);
-  v2.insert(v2.end(), payload.begin(), payload.end());
-  v2[8] = 2;
+  std::vector<uint8_t> earlier(32 + payload.size());
+  std::copy(current.begin(), current.begin() + 32, earlier.begin());
+  std::copy(payload.begin(), payload.end(), earlier.begin() + 32);
+  std::memcpy(earlier.data() + 8, &version, 4);
   const uint64_t size = payload.size();
-  std::memcpy(v2.data() + 16, &size, 8);
+  std::memcpy(earlier.data() + 16, &size, 8);
   const uint32_t payload_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), payload.data(), payload.size()));
-  std::memcpy(v2.data() + 24, &payload_crc, 4);
-  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), v2.data(), 28));
-  std::memcpy(v2.data() + 28, &header_crc, 4);
-  write(path("v2.mild"), v2);
+  std::memcpy(earlier.data() + 24, &payload_crc, 4);
+  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), earlier.data(), 28));
+  std::memcpy(earlier.data() + 28, &header_crc, 4);
+  return earlier;
+}
+
+// A version-2 file (written before keyframes had cameras) loads as keyframes without intrinsics.
+TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 4);
+  saveMap(source.map(), path("map.mild"));
+  write(path("v2.mild"), earlierVersion(bytes(path("map.mild")), 2));
 
   LoopDetector loaded(fixtureParams());
   loadMap(loaded.map(), path("v2.mild"), true);
@@ -238,6 +252,84 @@ TEST_F(DatabaseFile, VersionTwoFilesStillLoad) {
   }
   EXPECT_EQ(processImage(loaded, fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity,
             processImage(source, fixtureFrames()[10], PixelFormat::kGray, 5.0).similarity);
+}
+
+// The fixture's 320 x 240 frames under a cap of a quarter of their pixels: found at half size.
+DetectorParams cappedParams() {
+  DetectorParams p = fixtureParams();
+  p.features.max_pixels = 320.0 * 240.0 / 4.0;
+  return p;
+}
+
+// Version 4 keeps how much each keyframe's frame was shrunk before its keypoints were found, so a
+// loaded map verifies against its keyframes at the tolerance their keypoints need, as before the
+// restart: the same inliers and probabilities.
+TEST_F(DatabaseFile, EachKeyframesDetectionScaleIsKept) {
+  LoopDetector source(cappedParams());
+  process(source, 0, 30);
+  ASSERT_FLOAT_EQ(source.map().features(0).detection_scale, 2.0f);
+  saveMap(source.map(), path("map.mild"));
+  const MapState state = readMapFile(path("map.mild"));
+  ASSERT_EQ(state.records.size(), 30u);
+  for (const KeyframeRecord& r : state.records) EXPECT_FLOAT_EQ(r.detection_scale, 2.0f) << "keyframe " << r.id;
+
+  LoopDetector loaded(cappedParams());
+  loadMap(loaded.map(), path("map.mild"), true);
+  EXPECT_FLOAT_EQ(loaded.map().features(0).detection_scale, 2.0f);
+  for (size_t i = 52; i < 58; ++i) {  // the revisit
+    expectSameResults(processImage(loaded, fixtureFrames()[i], PixelFormat::kGray, 0.5 * i),
+                      processImage(source, fixtureFrames()[i], PixelFormat::kGray, 0.5 * i));
+  }
+}
+
+// A version-3 file (before the detection scale was saved) loads as keyframes found at full size.
+TEST_F(DatabaseFile, VersionThreeFilesLoadAsFoundAtFullSize) {
+  LoopDetector source(cappedParams());
+  process(source, 0, 4);
+  saveMap(source.map(), path("map.mild"));
+  write(path("v3.mild"), earlierVersion(bytes(path("map.mild")), 3));
+  LoopDetector loaded(cappedParams());
+  loadMap(loaded.map(), path("v3.mild"), true);
+  ASSERT_EQ(loaded.map().size(), 4u);
+  for (KeyframeIndex k = 0; k < 4; ++k) {
+    EXPECT_EQ(loaded.map().record(k).camera, source.map().record(k).camera);
+    EXPECT_EQ(loaded.map().record(k).keypoints.size(), source.map().record(k).keypoints.size());
+    EXPECT_FLOAT_EQ(loaded.map().features(k).detection_scale, 1.0f);
+  }
+}
+
+// A detection scale that cannot be one (not a number, a shrink below 1, beyond 64) is a corrupt
+// file, named, even with checksums that match it; the map it was meant for is left as it was.
+TEST_F(DatabaseFile, AnImpossibleDetectionScaleIsRefused) {
+  LoopDetector source(cappedParams());
+  process(source, 0, 2);
+  saveMap(source.map(), path("map.mild"));
+  const std::vector<uint8_t> good = bytes(path("map.mild"));
+  uint32_t parameters;
+  std::memcpy(&parameters, good.data() + 32, 4);
+  const size_t scale_at = 32 + 4 + parameters + 4 + 8 + 4 + 4 + 8 + 8 + 4 + 32;  // the first keyframe's
+  float stored;
+  std::memcpy(&stored, good.data() + scale_at, 4);
+  ASSERT_FLOAT_EQ(stored, 2.0f) << "the layout this test writes into";
+  for (const float bad : {std::numeric_limits<float>::quiet_NaN(), 0.5f, 65.0f, -2.0f}) {
+    std::vector<uint8_t> data = good;
+    std::memcpy(data.data() + scale_at, &bad, 4);
+    const uint32_t payload_crc =
+        static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data() + 32, static_cast<uInt>(data.size() - 32)));
+    std::memcpy(data.data() + 24, &payload_crc, 4);
+    const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
+    std::memcpy(data.data() + 28, &header_crc, 4);
+    write(path("bad.mild"), data);
+    LoopDetector running(cappedParams());
+    process(running, 0, 3);
+    try {
+      loadMap(running.map(), path("bad.mild"), true);
+      FAIL() << "loaded a detection scale of " << bad;
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("detection scale"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(running.map().size(), 3u) << "the running map is left as it was";
+  }
 }
 
 TEST_F(DatabaseFile, OtherIndexParametersRebuildTheIndexAndSaySo) {

@@ -30,11 +30,23 @@ struct Features {
   // Pixels of the frame per pixel of the image the keypoints were detected in: 1, or 1/s when
   // features/max_pixels shrank the frame by s before extraction (the keypoints are then mapped back
   // to the frame's pixels). Such keypoints are placed 1/s less precisely, and verification widens
-  // its pixel tolerances by the coarser side's scale. Kept in memory only (the map keeps a stored
-  // keyframe's while it runs): a Keyframe message, a map file and a team peer's pulled features
-  // carry none (1), so a peer's capped keyframe is judged at the deciding station's own scale.
+  // its pixel tolerances by the coarser side's scale. A stored keyframe keeps it, in a map file
+  // (format version 4) and in a team peer's pulled features (TeamFeatures.detection_scale); a
+  // Keyframe message carries none (1).
   float detection_scale = 1.0f;
 };
+
+// The widest detection_scale that means anything (a 64-fold shrink: 7,680 x 4,320 frames under a
+// 120 x 68 cap); verification widens its tolerances as much for a larger one and no more.
+constexpr float kMaxDetectionScale = 64.0f;
+// Whether `scale` can be a detection_scale: finite, 1 to kMaxDetectionScale. What a map file or a
+// team peer brings is checked with it; a scale of 0 from a peer means "not sent", i.e. 1.
+inline bool detectionScaleValid(float scale) { return scale >= 1.0f && scale <= kMaxDetectionScale; }
+// A scale as it is stored and sent: within [1, kMaxDetectionScale] (a larger shrink is judged as
+// the widest, so storing the widest loses nothing).
+inline float storedDetectionScale(float scale) {
+  return scale > 1.0f ? (scale < kMaxDetectionScale ? scale : kMaxDetectionScale) : 1.0f;
+}
 
 // The depths a keypoint may have: 1 cm to 10 km. Closer than any camera focuses, or farther than
 // any depth sensor or triangulation measures, a depth is a unit or scale error (1e30 m gave loops

@@ -31,8 +31,8 @@ struct KeyframeRecord {
   std::vector<cv::KeyPoint> keypoints;
   CameraIntrinsics camera;  // unknown unless the keyframe brought them
   // Its Features::detection_scale, so that verifying against it widens the tolerance for it too
-  // (a stored keyframe as a SparseMatch side, a pulled peer's query against it). In memory only:
-  // a map file does not save it, and a loaded keyframe is 1.
+  // (a stored keyframe as a SparseMatch side, a pulled peer's query against it). Saved in a map
+  // file (format version 4; a keyframe of an older file is 1) and sent to team peers.
   float detection_scale = 1.0f;
 };
 

@@ -99,9 +99,9 @@ struct GeometricCheck {
 // Sparse match of query against candidate, then a robust two-view model.
 class GeometricVerifier : public CandidateVerifier {
  public:
-  // The widest Features::detection_scale the tolerances follow (a 64-fold shrink: 7,680 x 4,320
-  // frames under a 120 x 68 cap); a larger one widens as much and no more.
-  static constexpr double kMaxDetectionScale = 64.0;
+  // The widest Features::detection_scale the tolerances follow (features.hpp); a larger one widens
+  // as much and no more.
+  static constexpr double kMaxDetectionScale = mild::kMaxDetectionScale;
 
   explicit GeometricVerifier(const VerificationParams& params);
   const VerificationParams& params() const { return params_; }

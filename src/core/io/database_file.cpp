@@ -104,6 +104,7 @@ void writePayload(const KeyframeMap& map, PayloadWriter& w) {
     w.put(r.camera.fy);
     w.put(r.camera.cx);
     w.put(r.camera.cy);
+    w.put(storedDetectionScale(r.detection_scale));
     w.put(static_cast<uint32_t>(r.keypoints.size()));
     for (const cv::KeyPoint& p : r.keypoints) {
       w.put(p.pt.x);
@@ -263,7 +264,9 @@ CheckedPayload checkedPayload(const uint8_t* data, size_t size, const std::strin
 }
 
 // Bytes of one keyframe record before its features, by format version.
-size_t recordBytes(uint32_t version) { return 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0); }
+size_t recordBytes(uint32_t version) {
+  return 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0) + (version >= 4 ? 4 : 0);
+}
 
 void readKeyframe(Cursor& in, uint32_t version, int descriptor_width, const std::string& origin, KeyframeRecord& r,
                   DescriptorList& descriptors) {
@@ -278,6 +281,14 @@ void readKeyframe(Cursor& in, uint32_t version, int descriptor_width, const std:
     r.camera.cy = in.get<double>("a keyframe's camera");
     if (!r.camera.wellFormed()) {
       throw InvalidInput(origin + ": corrupt: keyframe " + std::to_string(r.id) + " has malformed camera intrinsics");
+    }
+  }
+  if (version >= 4) {
+    r.detection_scale = in.get<float>("a keyframe's detection scale");
+    if (!detectionScaleValid(r.detection_scale)) {
+      throw InvalidInput(origin + ": corrupt: keyframe " + std::to_string(r.id) + " has detection scale " +
+                         std::to_string(r.detection_scale) + " (1 to " +
+                         std::to_string(static_cast<int>(kMaxDetectionScale)) + ")");
     }
   }
   const size_t features = in.count(kKeypointBytes + descriptor_bytes, "a keyframe's feature count");

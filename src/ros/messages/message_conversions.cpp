@@ -81,6 +81,23 @@ mild_lcd::Keyframe featuresToMsg(const mild::Features& features, int descriptor_
   return msg;
 }
 
+mild::Features featuresFromTeamReply(const mild_lcd::TeamFeatures& reply) {
+  mild::Features features = featuresFromMsg(reply.keyframe);
+  const float scale = reply.detection_scale == 0.0f ? 1.0f : reply.detection_scale;
+  if (!mild::detectionScaleValid(scale)) {
+    throw mild::InvalidInput("a pulled keyframe's detection_scale is " + std::to_string(reply.detection_scale) +
+                             "; it is 1 to " + std::to_string(static_cast<int>(mild::kMaxDetectionScale)) +
+                             ", or 0 for none");
+  }
+  features.detection_scale = scale;
+  return features;
+}
+
+void setTeamReplyFeatures(const mild::Features& stored, int descriptor_bytes, mild_lcd::TeamFeatures& reply) {
+  reply.keyframe = featuresToMsg(stored, descriptor_bytes);
+  reply.detection_scale = mild::storedDetectionScale(stored.detection_scale);
+}
+
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
   const mild::CameraIntrinsics camera{msg.K[0], msg.K[4], msg.K[2], msg.K[5]};
   // Unknown when the entries read are zero, whatever the others hold: drivers without a

@@ -485,7 +485,7 @@ void TeamLink::onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply) {
       ++p->features_in;
       p->feature_bytes_in += bytesOf(*reply);
       try {
-        features = featuresFromMsg(reply->keyframe);
+        features = featuresFromTeamReply(*reply);  // with its keypoints' precision, the detection scale
         mild::checkCameraAndDepths(features);
         verify = features.descriptors.size() <= static_cast<size_t>(settings_.max_keyframe_features) &&
                  (features.declared_bytes == 0 || features.declared_bytes == descriptor_bytes_) &&
@@ -641,7 +641,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
     const auto lock = shared_.lock();
     const mild::KeyframeMap& map = shared_.robot(robot).map();
     if (const auto index = map.find(request->id)) {
-      reply->keyframe = featuresToMsg(map.features(*index), descriptor_bytes_);
+      setTeamReplyFeatures(map.features(*index), descriptor_bytes_, *reply);
       reply->keyframe.id = request->id;
       reply->keyframe.has_id = true;
       reply->status = mild_lcd::TeamFeatures::OK;

@@ -3,6 +3,8 @@
 // ros/services/sparse_match_service.hpp): compressed-image headers, input bounds,
 // sparse_match requests, LoopClosure fields.
 
+#include <limits>
+
 #include "ros_parts_support.hpp"
 
 namespace mild_lcd {
@@ -141,6 +143,32 @@ TEST(Conversions, AnEmptyKeyframeCarriesItsDeclaredWidth) {
   mild::LoopDetector orb;
   EXPECT_THROW(orb.process(mild::Observation::ofFeatures(featuresFromMsg(kf), 1.0)), mild::InvalidInput);
   EXPECT_EQ(orb.map().size(), 0u);
+}
+
+// A team peer's pulled keyframe keeps how much its frame was shrunk (features/max_pixels), so the
+// station that verifies it widens its tolerances as the peer would; what cannot be a scale is
+// refused like a torn keyframe.
+TEST(Conversions, APulledKeyframeKeepsItsDetectionScale) {
+  mild::Features stored;
+  stored.keypoints = {cv::KeyPoint(10.f, 20.f, 31.f)};
+  stored.descriptors = {mild::Descriptor(32)};
+  stored.detection_scale = 2.5f;
+  mild_lcd::TeamFeatures reply;
+  setTeamReplyFeatures(stored, 32, reply);
+  EXPECT_FLOAT_EQ(reply.detection_scale, 2.5f);
+  const mild::Features pulled = featuresFromTeamReply(reply);
+  EXPECT_FLOAT_EQ(pulled.detection_scale, 2.5f);
+  EXPECT_EQ(pulled.keypoints.size(), 1u);
+  stored.detection_scale = 1000.0f;  // a shrink beyond what verification follows is sent as the widest
+  setTeamReplyFeatures(stored, 32, reply);
+  EXPECT_FLOAT_EQ(reply.detection_scale, mild::kMaxDetectionScale);
+  reply.detection_scale = 0.0f;  // a peer that sends none
+  EXPECT_FLOAT_EQ(featuresFromTeamReply(reply).detection_scale, 1.0f);
+  for (const float bad :
+       {std::numeric_limits<float>::quiet_NaN(), 0.5f, -1.0f, 65.0f, std::numeric_limits<float>::infinity()}) {
+    reply.detection_scale = bad;
+    EXPECT_THROW(featuresFromTeamReply(reply), mild::InvalidInput) << bad;
+  }
 }
 
 TEST(Conversions, StampsOutsideRosTimeAreClamped) {

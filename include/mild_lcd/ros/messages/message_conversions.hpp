@@ -16,6 +16,7 @@
 #include "mild_lcd/KeyPoint.h"
 #include "mild_lcd/Keyframe.h"
 #include "mild_lcd/LoopClosure.h"
+#include "mild_lcd/TeamFeatures.h"
 #include "mild_lcd/detector/loop_detector.hpp"
 
 namespace mild_lcd {
@@ -42,6 +43,13 @@ constexpr double kMaxFocalPixels = 1e6;
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg);
 // A keyframe's features as a Keyframe message (no header, no id): what featuresFromMsg reads back.
 mild_lcd::Keyframe featuresToMsg(const mild::Features& features, int descriptor_bytes);
+
+// A team peer's pulled keyframe (a TeamFeatures reply that is OK): featuresFromMsg of its keyframe
+// with its detection_scale, 0 (a peer that sent none) being 1. Throws InvalidInput for a scale that
+// cannot be one (mild::detectionScaleValid: not a number, below 1, beyond 64), as for sizes.
+mild::Features featuresFromTeamReply(const mild_lcd::TeamFeatures& reply);
+// The reply's fields for a stored keyframe: its features and its detection scale.
+void setTeamReplyFeatures(const mild::Features& stored, int descriptor_bytes, mild_lcd::TeamFeatures& reply);
 
 // The answer published for one processed keyframe (candidate stamps come from the candidates).
 // With `correspondences`, verified candidates carry their inlier matches. `robot_names`: the
