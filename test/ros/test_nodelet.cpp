@@ -168,6 +168,41 @@ TEST_F(Replay, ReportsTheKnownLoopAndNoFalsePositive) {
   EXPECT_GE(detected.size(), 3u) << "the revisit (keyframes 47-59) must be reported, verified, at the decision";
 }
 
+// Frames shrunk before extraction (features/max_pixels, nodelet_budget.test: the fixture's 320 x 240
+// under a cap of 277 x 207) publish their loops' inlier correspondences in the frames' own pixels,
+// not the shrunk image's: within 320 x 240 and beyond 277 across. Run where the node publishes
+// correspondences (the private parameter frame_width names the frames' width).
+TEST_F(Replay, PublishedInlierPixelsAreTheFramesOwn) {
+  const std::string width_param = privateParam("frame_width");
+  if (width_param.empty()) GTEST_SKIP() << "the node of this launch file publishes no correspondences";
+  const double width = std::stod(width_param), height = std::stod(privateParam("frame_height"));
+  const double shrunk_width = std::stod(privateParam("shrunk_width"));
+  float max_x = 0.0f, max_y = 0.0f;
+  size_t verified = 0;
+  for (const auto& msg : outputs_->messages()) {
+    for (const auto& c : msg.candidates) {
+      if (!c.verified) continue;
+      ++verified;
+      ASSERT_EQ(c.inlier_query_pixels.size(), 2u * static_cast<size_t>(c.inliers));
+      ASSERT_EQ(c.inlier_candidate_pixels.size(), 2u * static_cast<size_t>(c.inliers));
+      for (const auto* pixels : {&c.inlier_query_pixels, &c.inlier_candidate_pixels}) {
+        for (size_t i = 0; i + 1 < pixels->size(); i += 2) {
+          EXPECT_GE((*pixels)[i], -0.5f);
+          EXPECT_LT((*pixels)[i], width);
+          EXPECT_GE((*pixels)[i + 1], -0.5f);
+          EXPECT_LT((*pixels)[i + 1], height);
+          max_x = std::max(max_x, (*pixels)[i]);
+          max_y = std::max(max_y, (*pixels)[i + 1]);
+        }
+      }
+    }
+  }
+  ASSERT_GT(verified, 0u) << "no verified candidate to look at";
+  // The corridor's inliers reach its right edge; its floor, at the bottom, has few.
+  EXPECT_GT(max_x, shrunk_width) << "inliers in the shrunk image's pixels, not the frame's";
+  EXPECT_GT(max_y, 0.5 * height);
+}
+
 TEST_F(Replay, DebugImageShowsQueryAndCandidateSideBySide) {
   const auto images = debug_images_->messages();
   ASSERT_FALSE(images.empty()) << "debug_image had a subscriber but nothing was published";
