@@ -164,15 +164,24 @@ TEST_F(DatabaseFile, BadFilesAreClearErrorsAndLeaveTheDetectorAsItWas) {
   EXPECT_EQ(processImage(running, fixtureFrames()[31], PixelFormat::kGray, 15.5).query_id, next_before);
 }
 
+// Makes a file's two checksums (payload, then header) match what it now holds, so that what is
+// tested is read past them.
+void matchChecksums(std::vector<uint8_t>& file) {
+  const uint32_t payload_crc =
+      static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), file.data() + 32, static_cast<uInt>(file.size() - 32)));
+  std::memcpy(file.data() + 24, &payload_crc, 4);
+  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), file.data(), 28));
+  std::memcpy(file.data() + 28, &header_crc, 4);
+}
+
 TEST_F(DatabaseFile, ANewerFormatVersionIsNamed) {
   LoopDetector source(fixtureParams());
   process(source, 0, 3);
   saveMap(source.map(), path("map.mild"));
   std::vector<uint8_t> data = bytes(path("map.mild"));
   const uint32_t newer = kDatabaseFormatVersion + 1;
-  std::memcpy(data.data() + 8, &newer, 4);  // with a header checksum that matches it
-  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
-  std::memcpy(data.data() + 28, &header_crc, 4);
+  std::memcpy(data.data() + 8, &newer, 4);
+  matchChecksums(data);
   write(path("newer.mild"), data);
   try {
     readMapFile(path("newer.mild"));
@@ -228,10 +237,7 @@ std::vector<uint8_t> earlierVersion(const std::vector<uint8_t>& current, uint32_
   std::memcpy(earlier.data() + 8, &version, 4);
   const uint64_t size = payload.size();
   std::memcpy(earlier.data() + 16, &size, 8);
-  const uint32_t payload_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), payload.data(), payload.size()));
-  std::memcpy(earlier.data() + 24, &payload_crc, 4);
-  const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), earlier.data(), 28));
-  std::memcpy(earlier.data() + 28, &header_crc, 4);
+  matchChecksums(earlier);
   return earlier;
 }
 
@@ -314,11 +320,7 @@ TEST_F(DatabaseFile, AnImpossibleDetectionScaleIsRefused) {
   for (const float bad : {std::numeric_limits<float>::quiet_NaN(), 0.5f, 65.0f, -2.0f}) {
     std::vector<uint8_t> data = good;
     std::memcpy(data.data() + scale_at, &bad, 4);
-    const uint32_t payload_crc =
-        static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data() + 32, static_cast<uInt>(data.size() - 32)));
-    std::memcpy(data.data() + 24, &payload_crc, 4);
-    const uint32_t header_crc = static_cast<uint32_t>(crc32(crc32(0, nullptr, 0), data.data(), 28));
-    std::memcpy(data.data() + 28, &header_crc, 4);
+    matchChecksums(data);
     write(path("bad.mild"), data);
     LoopDetector running(cappedParams());
     process(running, 0, 3);

@@ -125,7 +125,7 @@ TEST(ResolutionCap, AnAbsurdScaleIsBounded) {
   Features qa = extractor->extract(test::sampleFrames().at(30), PixelFormat::kGray);
   Features qb = extractor->extract(test::sampleFrames().at(33), PixelFormat::kGray);
   const GeometricVerifier verifier{VerificationParams{}};
-  qa.detection_scale = static_cast<float>(GeometricVerifier::kMaxDetectionScale);
+  qa.detection_scale = kMaxDetectionScale;
   const Verification widest = verifier.verify(qa, qb);
   qa.detection_scale = 1e30f;
   const Verification absurd = verifier.verify(qa, qb);

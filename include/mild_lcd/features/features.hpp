@@ -1,5 +1,7 @@
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <optional>
 #include <vector>
 
@@ -42,10 +44,11 @@ constexpr float kMaxDetectionScale = 64.0f;
 // Whether `scale` can be a detection_scale: finite, 1 to kMaxDetectionScale. What a map file or a
 // team peer brings is checked with it; a scale of 0 from a peer means "not sent", i.e. 1.
 inline bool detectionScaleValid(float scale) { return scale >= 1.0f && scale <= kMaxDetectionScale; }
-// A scale as it is stored and sent: within [1, kMaxDetectionScale] (a larger shrink is judged as
-// the widest, so storing the widest loses nothing).
-inline float storedDetectionScale(float scale) {
-  return scale > 1.0f ? (scale < kMaxDetectionScale ? scale : kMaxDetectionScale) : 1.0f;
+// A scale as verification follows it, stores it and sends it: within [1, kMaxDetectionScale]; one
+// that is not a number, infinite or below 1 is 1 (a caller's absurd scale must not make every match
+// an inlier), and a larger shrink is judged as the widest, so storing the widest loses nothing.
+inline float boundedDetectionScale(float scale) {
+  return std::isfinite(scale) && scale > 1.0f ? std::min(scale, kMaxDetectionScale) : 1.0f;
 }
 
 // The depths a keypoint may have: 1 cm to 10 km. Closer than any camera focuses, or farther than

@@ -99,10 +99,6 @@ struct GeometricCheck {
 // Sparse match of query against candidate, then a robust two-view model.
 class GeometricVerifier : public CandidateVerifier {
  public:
-  // The widest Features::detection_scale the tolerances follow (features.hpp); a larger one widens
-  // as much and no more.
-  static constexpr double kMaxDetectionScale = mild::kMaxDetectionScale;
-
   explicit GeometricVerifier(const VerificationParams& params);
   const VerificationParams& params() const { return params_; }
 
@@ -130,8 +126,8 @@ class GeometricVerifier : public CandidateVerifier {
   // The sparse match alone, after checking that each side has one keypoint per descriptor.
   static std::vector<FeatureMatch> matchWith(SparseMatcher& matcher, const Features& query, const Features& candidate);
   GeometricCheck checkWith(SparseMatcher& matcher, const Features& query, const Features& candidate) const;
-  // The coarser side's Features::detection_scale (at least 1): a keypoint found on an image shrunk by
-  // s is placed 1/s less precisely in the frame, so the tolerances widen by 1/s.
+  // The coarser side's Features::detection_scale (boundedDetectionScale: 1 to 64): a keypoint found on an image shrunk
+  // by s is placed 1/s less precisely in the frame, so the tolerances widen by 1/s.
   static double detectionScale(const Features& query, const Features& train);
 
   VerificationParams params_;

@@ -104,7 +104,7 @@ void writePayload(const KeyframeMap& map, PayloadWriter& w) {
     w.put(r.camera.fy);
     w.put(r.camera.cx);
     w.put(r.camera.cy);
-    w.put(storedDetectionScale(r.detection_scale));
+    w.put(boundedDetectionScale(r.detection_scale));
     w.put(static_cast<uint32_t>(r.keypoints.size()));
     for (const cv::KeyPoint& p : r.keypoints) {
       w.put(p.pt.x);

@@ -137,11 +137,7 @@ GeometricCheck GeometricVerifier::fit(const Features& query, const Features& tra
 }
 
 double GeometricVerifier::detectionScale(const Features& query, const Features& train) {
-  // Within [1, kMaxDetectionScale]: a caller's absurd scale must not make every match an inlier.
-  const auto scale = [](float s) {
-    return std::isfinite(s) && s > 1.0f ? std::min(static_cast<double>(s), kMaxDetectionScale) : 1.0;
-  };
-  return std::max(scale(query.detection_scale), scale(train.detection_scale));
+  return std::max(boundedDetectionScale(query.detection_scale), boundedDetectionScale(train.detection_scale));
 }
 
 GeometricCheck GeometricVerifier::fit(const std::vector<cv::KeyPoint>& query, const std::vector<cv::KeyPoint>& train,

@@ -95,7 +95,7 @@ mild::Features featuresFromTeamReply(const mild_lcd::TeamFeatures& reply) {
 
 void setTeamReplyFeatures(const mild::Features& stored, int descriptor_bytes, mild_lcd::TeamFeatures& reply) {
   reply.keyframe = featuresToMsg(stored, descriptor_bytes);
-  reply.detection_scale = mild::storedDetectionScale(stored.detection_scale);
+  reply.detection_scale = mild::boundedDetectionScale(stored.detection_scale);
 }
 
 mild::CameraIntrinsics intrinsicsFromMsg(const sensor_msgs::CameraInfo& msg) {
