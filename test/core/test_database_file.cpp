@@ -64,10 +64,13 @@ class DatabaseFile : public mild::test::ScratchFolderTest {
 };
 
 TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {
-  for (const char* type : {"exclusive_hypotheses", "independent_binary"}) {
-    SCOPED_TRACE(type);
+  const std::vector<std::pair<const char*, int>> filters = {
+      {"exclusive_hypotheses", 0}, {"independent_binary", 0}, {"exclusive_hypotheses", 3}};  // 3: hub-corrected
+  for (const auto& [type, hubness_min_queries] : filters) {
+    SCOPED_TRACE(std::string(type) + " hubness_min_queries " + std::to_string(hubness_min_queries));
     DetectorParams params = fixtureParams();
     params.filter.type = type;
+    params.filter.hubness_min_queries = hubness_min_queries;
     params.scoring.filter_type = type;  // not a fitted scorer: the test compares runs, not probabilities
     LoopDetector whole(params);
     std::vector<DetectionResult> expected;
@@ -93,6 +96,25 @@ TEST_F(DatabaseFile, ContinuingASavedSessionGivesTheUninterruptedResults) {
     }
     EXPECT_GT(loops, 0u);
   }
+}
+
+TEST_F(DatabaseFile, AHubCorrectedRunIsResumedOnlyWithTheCorrection) {
+  DetectorParams corrected = fixtureParams();
+  corrected.filter.hubness_min_queries = 3;
+  LoopDetector first(corrected);
+  process(first, 0, 20);
+  saveMap(first.map(), path("map.mild"));
+  LoopDetector plain(fixtureParams());
+  process(plain, 0, 2);
+  try {
+    loadMap(plain.map(), path("map.mild"), /*continue_session=*/true);
+    ADD_FAILURE() << "a hub-corrected filter state loaded into a plain filter";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("exclusive_hypotheses+hubness"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(plain.map().size(), 2u) << "the running map is left as it was";
+  // A new session needs no filter state: the stored keyframes load into any filter.
+  EXPECT_EQ(loadMap(plain.map(), path("map.mild"), /*continue_session=*/false).keyframes, 20u);
 }
 
 TEST_F(DatabaseFile, ANewSessionOnAStoredMapMatchesItsNewestKeyframesAtOnce) {

@@ -33,6 +33,10 @@ class TemporalFilter {
   // How many keyframes the state covers (the eligible prefix of the last update).
   virtual size_t stateKeyframes() const = 0;
   virtual void reset() = 0;
+  // What the last update judged the keyframes by, when it is not the similarity it was given (a
+  // filter that corrects its input: HubCorrectedFilter); nullptr when it is the similarity. The
+  // detector draws its candidates and their saliency from the same values the filter weighed.
+  virtual const std::vector<double>* evidence() const { return nullptr; }
 
   // The state as bytes and back, bit-exact (a resumed run continues exactly). loadState throws
   // InvalidInput, changing nothing, for bytes that are not a state of this filter.

@@ -125,7 +125,10 @@ MapAnswer LoopDetector::queryMap(const KeyframeMap& map, const DescriptorList& q
   answer.query_ms = msSince(start);
   start = Clock::now();
   const std::vector<double>& belief = filter.update(answer.query.similarity);
-  const std::vector<double>& similarity = answer.query.similarity;
+  // The candidates and their saliency come from what the filter weighed (a hub-corrected filter's
+  // evidence, or the similarity); a candidate's published similarity is the similarity itself.
+  const std::vector<double>& raw = answer.query.similarity;
+  const std::vector<double>& similarity = filter.evidence() != nullptr ? *filter.evidence() : raw;
   const std::vector<double> saliency = robustSaliency(similarity);
   const auto radius = static_cast<KeyframeIndex>(params_.candidates.suppression_radius);
   const auto add = [&](KeyframeIndex j) {
@@ -140,7 +143,7 @@ MapAnswer LoopDetector::queryMap(const KeyframeMap& map, const DescriptorList& q
     c.stamp = record.stamp;
     c.filter_probability = belief[j];
     c.probability = belief[j];
-    c.similarity = similarity[j];
+    c.similarity = raw[j];
     c.saliency = saliency[j];
     c.eligible_keyframes = similarity.size();
     answer.candidates.push_back(c);

@@ -7,6 +7,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/common/median.hpp"
 #include "mild_lcd/filter/filters.hpp"
+#include "mild_lcd/filter/hub_corrected_filter.hpp"
 
 namespace mild {
 
@@ -27,6 +28,9 @@ std::unique_ptr<TemporalFilter> makeTemporalFilter(const FilterParams& params) {
     using F = typename decltype(entry)::type;
     filter = std::make_unique<F>(params.section<typename F::Params>());
   });
+  if (params.hubness_min_queries > 0) {
+    filter = std::make_unique<HubCorrectedFilter>(std::move(filter), params.hubness_min_queries);
+  }
   return filter;
 }
 
