@@ -126,8 +126,9 @@ def main():
     for r in runs:
         cells = [f"{v[0]:.3f} / {v[1]:.3f} / {v[2]:.3f}" if v else "–" for v in (left[r["id"]].get(h) for h in heads)]
         print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | " + " | ".join(cells) + " |")
-    worst = {h: max(left[r["id"]][h][0] for r in runs if h in left[r["id"]]) for h in heads}
-    print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" for h, v in worst.items()))
+    # A grouping with nothing fitted (descriptors without the fitted one, e.g. DESCRIPTORS=brisk,akaze) has no worst.
+    worst = {h: max((left[r["id"]][h][0] for r in runs if h in left[r["id"]]), default=None) for h in heads}
+    print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" if v is not None else f"{h} –" for h, v in worst.items()))
 
     if a.plots:
         plot(a.plots, runs, score)
