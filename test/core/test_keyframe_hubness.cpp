@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <vector>
 
@@ -147,6 +148,25 @@ TEST(HubCorrectedFilter, ABadStateIsRefusedAndChangesNothing) {
   lying[0] = 0xff;  // the wrapped filter's size, beyond the state
   EXPECT_THROW(a->loadState(lying), InvalidInput);
   EXPECT_EQ(a->saveState(), good);
+}
+
+TEST(HubCorrectedFilter, ItsStateCoversTheKeyframesEitherPartKnows) {
+  // A map refuses a filter state covering more keyframes than it holds (KeyframeMap): a state whose
+  // hubness alone is too long must count as too long.
+  std::unique_ptr<TemporalFilter> a = makeTemporalFilter(withHubness(5));
+  a->update(std::vector<double>(10, 1.0));
+  EXPECT_EQ(a->stateKeyframes(), 10u);
+  HubCorrectedFilter b(makeTemporalFilter(FilterParams{}), 5);
+  std::vector<uint8_t> state(sizeof(uint64_t), 0);  // an empty wrapped state ...
+  const std::vector<uint8_t> inner = makeTemporalFilter(FilterParams{})->saveState();
+  const uint64_t size = inner.size();
+  std::memcpy(state.data(), &size, sizeof size);
+  state.insert(state.end(), inner.begin(), inner.end());
+  KeyframeHubness long_hubness(5);
+  long_hubness.correct(std::vector<double>(500, 1.0));  // ... beside the hubness of 500 keyframes
+  long_hubness.appendState(state);
+  b.loadState(state);
+  EXPECT_EQ(b.stateKeyframes(), 500u);
 }
 
 TEST(HubCorrectedFilter, ResetForgetsTheHubs) {

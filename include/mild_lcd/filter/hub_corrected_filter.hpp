@@ -6,6 +6,7 @@
 // resumed only with it (the hubness is part of the saved state) and one saved without it only
 // without it.
 
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -22,7 +23,8 @@ class HubCorrectedFilter : public TemporalFilter {
 
   const std::vector<double>& update(const std::vector<double>& similarity) override;
   const std::vector<double>& loopProbability() const override { return filter_->loopProbability(); }
-  size_t stateKeyframes() const override { return filter_->stateKeyframes(); }
+  // Either part's: a loaded map refuses a state covering more keyframes than it holds.
+  size_t stateKeyframes() const override { return std::max(filter_->stateKeyframes(), hubness_.keyframes()); }
   void reset() override;
   const std::vector<double>* evidence() const override { return &evidence_; }
   // The wrapped filter's state, then the hubness: u64 size of the first, its bytes, the hubness's.
