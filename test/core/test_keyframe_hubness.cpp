@@ -138,9 +138,8 @@ TEST(HubCorrectedFilter, ABadStateIsRefusedAndChangesNothing) {
   const std::vector<uint8_t> plain_state = plain->saveState();
   EXPECT_THROW(plain->loadState(good), InvalidInput) << "a plain filter does not take a corrected state";
   EXPECT_EQ(plain->saveState(), plain_state);
-  for (const std::vector<uint8_t>& bad :
-       {std::vector<uint8_t>{}, std::vector<uint8_t>(good.begin(), good.end() - 1), plain_state,
-        std::vector<uint8_t>(good.begin(), good.begin() + 8)}) {
+  for (const std::vector<uint8_t>& bad : {std::vector<uint8_t>{}, std::vector<uint8_t>(good.begin(), good.end() - 1),
+                                          plain_state, std::vector<uint8_t>(good.begin(), good.begin() + 8)}) {
     EXPECT_THROW(a->loadState(bad), InvalidInput) << bad.size() << " bytes";
     EXPECT_EQ(a->saveState(), good) << bad.size() << " bytes";
   }
