@@ -26,6 +26,7 @@
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/SaveDatabase.h"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/filter/keyframe_hubness.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "ros_test_support.hpp"
@@ -487,6 +488,18 @@ TEST(Persistence, ShutdownWithAFullQueueSavesWhatWasProcessedInTime) {
   const size_t saved = mild::readMapFile(map).records.size();
   EXPECT_GE(saved, answered) << "every answered keyframe is in the saved map";
   EXPECT_LT(saved, 2000u) << "the queue was not worked off before saving";
+}
+
+// nodelet_hubness.test: filter/hubness_min_queries from the parameter server reaches the filter; the
+// saved map names the hub-corrected filter and holds its state (the test before it found the loops).
+TEST(HubCorrection, TheSavedMapHoldsTheHubCorrectedFilter) {
+  mild_lcd::SaveDatabase::Request save;
+  save.path = (scratch() / "hubness.mild").string();
+  const auto saved = call<mild_lcd::SaveDatabase>("save_database", save);
+  ASSERT_TRUE(saved.response.success) << saved.response.message;
+  const mild::MapState contents = mild::readMapFile(save.path);
+  EXPECT_EQ(contents.filter_name, "exclusive_hypotheses+hubness");
+  EXPECT_GT(contents.filter_state.size(), mild::KeyframeHubness::stateBytes(contents.records.size() / 2));
 }
 
 }  // namespace
