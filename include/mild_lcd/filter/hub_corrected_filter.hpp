@@ -31,8 +31,6 @@ class HubCorrectedFilter : public TemporalFilter {
   std::vector<uint8_t> saveState() const override;
   void loadState(const std::vector<uint8_t>& bytes) override;
 
-  const KeyframeHubness& hubness() const { return hubness_; }
-
  private:
   std::unique_ptr<TemporalFilter> filter_;
   std::string name_;

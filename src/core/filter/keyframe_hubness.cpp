@@ -47,9 +47,8 @@ std::vector<double> KeyframeHubness::correct(const std::vector<double>& similari
   std::vector<double> z = robustSaliency(similarity);
   counts_.resize(n, 0);
   bins_.resize(n * kBins, 0);
-  std::vector<double> corrected(n);
   for (size_t j = 0; j < n; ++j) {
-    corrected[j] = z[j] - hubness(j);
+    const double hub = hubness(j);  // of the earlier queries, before this one is recorded
     uint16_t* h = bins_.data() + j * kBins;
     uint16_t& bin = h[binOf(z[j])];
     if (bin == std::numeric_limits<uint16_t>::max()) {  // keep the shape, forget half the weight
@@ -57,8 +56,9 @@ std::vector<double> KeyframeHubness::correct(const std::vector<double>& similari
     }
     ++bin;
     if (counts_[j] < std::numeric_limits<uint32_t>::max()) ++counts_[j];
+    z[j] -= hub;
   }
-  return corrected;
+  return z;
 }
 
 void KeyframeHubness::reset() {
