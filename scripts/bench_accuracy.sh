@@ -34,15 +34,7 @@ sequences=()
 add_generated() {  # name, gen.py arguments...
   local name=$1
   shift
-  if [[ ! -f "$CACHE/$name/gt_loops.txt" ]]; then
-    echo "[mild_lcd] rendering $name into $CACHE (once)" >&2
-    rm -rf "$CACHE/tmp_$name"
-    (cd "$BENCH/generator" && /usr/bin/python3 gen.py "$@" --out "$CACHE/tmp_$name" >"$CACHE/$name.log" 2>&1)
-    local made
-    made=$(find "$CACHE/tmp_$name" -name gt_loops.txt -printf '%h\n' | head -n 1)
-    mv "$made" "$CACHE/$name"
-    rm -rf "$CACHE/tmp_$name"
-  fi
+  mild_render_generated "$CACHE" "$name" "$@"
   sequences+=("$name=$CACHE/$name")
 }
 for set in ${SETS//,/ }; do

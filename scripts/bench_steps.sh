@@ -24,17 +24,6 @@ mild_configure_and_build --target mild_offline >/dev/null
 BIN="$BUILD_DIR/devel/lib/mild_lcd"
 mkdir -p "$OUT" "$CACHE/steps"
 
-render() {  # name, gen.py arguments...: a generated sequence in the cache, rendered once
-  local name=$1
-  shift
-  if [[ ! -f "$CACHE/$name/gt_loops.txt" ]]; then
-    echo "[mild_lcd] rendering $name into $CACHE (once)" >&2
-    rm -rf "$CACHE/tmp_$name"
-    (cd "$BENCH/generator" && /usr/bin/python3 gen.py "$@" --out "$CACHE/tmp_$name" >"$CACHE/$name.log" 2>&1)
-    mv "$(find "$CACHE/tmp_$name" -name gt_loops.txt -printf '%h\n' | head -n 1)" "$CACHE/$name"
-    rm -rf "$CACHE/tmp_$name"
-  fi
-}
 runs=()
 add() {  # source folder, name, step: the subsampled sequence (symlinks, in the cache)
   local dir="$CACHE/steps/${2}_k$3"
@@ -50,7 +39,7 @@ done
 if [[ "${HOLDOUT:-1}" != 0 ]]; then
   for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do
     for seed in 203 204; do
-      render "${s}_s$seed" seq "$s" --seed "$seed"
+      mild_render_generated "$CACHE" "${s}_s$seed" seq "$s" --seed "$seed"
       add "$CACHE/${s}_s$seed" "${s}_s$seed" 5
     done
   done

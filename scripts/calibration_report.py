@@ -14,8 +14,12 @@ Prints Markdown tables:
      -- real frames, each render kind, each keyframe step (fitted on ORB runs, as the default) and
      each descriptor (fitted on the others) -- and scored on what was left out: ECE (the referee's
      bins), recall@100%P, AP;
-and draws a reliability diagram per kind (real day, real night, each render kind, each descriptor)
-from the published candidates into --plots. With --fit, prints the scorer fitted on every run.
+  3. the runs of generated scenes whose seed is in --held-out-seeds (other rooms, routes and textures of
+     every kind, rendered by ../shared/bench/generator): never fitted on, in none of the fits above,
+     scored as published, as in 1, with a summary per descriptor;
+and draws a reliability diagram per kind (real day, real night, each render kind, each descriptor, and
+the never-fitted scenes per kind) from the published candidates into --plots. With --fit, prints the
+scorer fitted on every run but the never-fitted ones.
 """
 import argparse
 import json
@@ -71,8 +75,11 @@ def main():
     ap.add_argument("--fit", action="store_true")
     ap.add_argument("--decision", type=float, default=None,
                     help="the decision probability (default: config/default.yaml's)")
+    ap.add_argument("--held-out-seeds", default="",
+                    help="comma-separated generator seeds whose runs are never fitted on and are printed apart")
     ap.add_argument("runs", nargs="+")
     a = ap.parse_args()
+    held_seeds = {x for x in a.held_out_seeds.split(",") if x}
     decision = a.decision if a.decision is not None else default_decision()
     fit_scoring.DECISION = decision
     runs = []
@@ -80,9 +87,12 @@ def main():
         rid, seq = spec.split("=", 1)
         desc, name = rid.split("/", 1)
         run = fit_scoring.load_run(f"{name}={seq}:{a.results}/{rid}.details.csv")
+        seed = re.search(r"_s(\d+)(?:_k\d+)?$", name)
         run.update({"id": rid, "descriptor": desc, "seq": seq, "csv": f"{a.results}/{rid}.csv",
-                    "label": kind_name(name)})
+                    "label": kind_name(name), "held_out": bool(seed) and seed.group(1) in held_seeds})
         runs.append(run)
+    held = [r for r in runs if r["held_out"]]
+    runs = [r for r in runs if not r["held_out"]]
 
     # 1. As published, by the bench's own referees.
     sys.path.insert(0, a.bench)
@@ -90,16 +100,7 @@ def main():
     import score  # noqa: E402
     print(f"\nAs published (decision probability {decision}): ECE by ../shared/bench/calibration.py, "
           "recall@100%P / AP by score.py, each query's best candidate at the decision.\n")
-    print("| descriptor | sequence | step | scored | ECE | recall@100%P / AP | precision / recall at the decision |")
-    print("|---|---|---|---|---|---|---|")
-    for r in runs:
-        c = calibration.calibration(r["seq"], r["csv"])
-        s = score_json(a.bench, r["seq"], r["csv"])
-        m = at_decision(scored_best(score, r["seq"], r["csv"]), len(r["queries"]), decision)
-        prec = "–" if math.isnan(m["precision_at_decision"]) else f"{m['precision_at_decision']:.3f}"
-        print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | {c['scored']} | "
-              f"{c['ece']:.3f} | {s['recall_at_100_precision']:.3f} / {s['average_precision']:.3f} | {prec} ({m['wrong_at_decision']} wrong) / "
-              f"{m['recall_at_decision']:.3f} |")
+    published_table(runs, a.bench, calibration, score, decision)
 
     # 2. Left out.
     groupings = [("kind", lambda r: r["kind"]), ("descriptor", lambda r: r["descriptor"]),
@@ -130,14 +131,46 @@ def main():
     worst = {h: max((left[r["id"]][h][0] for r in runs if h in left[r["id"]]), default=None) for h in heads}
     print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" if v is not None else f"{h} –" for h, v in worst.items()))
 
+    # 3. Never fitted.
+    if held:
+        print(f"\nScenes no fit has seen (generator seeds {', '.join(sorted(held_seeds))}), as published:\n")
+        rows = published_table(held, a.bench, calibration, score, decision)
+        for desc in sorted({r["descriptor"] for r in held}):
+            mine = [row for r, row in zip(held, rows) if r["descriptor"] == desc]
+            eces = [row["ece"] for row in mine]
+            low = [row for row in mine if not math.isnan(row["precision_at_decision"]) and row["precision_at_decision"] < 0.98]
+            print(f"\n{desc}, {len(mine)} runs: mean ECE {np.mean(eces):.3f}, worst {max(eces):.3f}, "
+                  f"{sum(e <= 0.05 for e in eces)} at most 0.05; mean recall@100%P / AP "
+                  f"{np.mean([row['recall_at_100_precision'] for row in mine]):.3f} / "
+                  f"{np.mean([row['average_precision'] for row in mine]):.3f}; precision at the decision under 0.98 in "
+                  f"{len(low)} runs, {sum(row['wrong_at_decision'] for row in mine)} wrong loops accepted in all")
+
     if a.plots:
-        plot(a.plots, runs, score)
+        plot(a.plots, runs + held, score)
     if a.fit:
         w, b = fit_scoring.fit([r for r in runs if r["descriptor"] in FIT_DESCRIPTORS], fit_scoring.L2)
-        print(f"\nscoring (fitted on every {', '.join(sorted(FIT_DESCRIPTORS))} run above):")
+        print(f"\nscoring (fitted on every {', '.join(sorted(FIT_DESCRIPTORS))} run of tables 1 and 2):")
         print(f"  # features: {', '.join(runs[0]['features'])}")
         print(f"  weights: [{', '.join(f'{v:.3f}' for v in w)}]")
         print(f"  bias: {b:.3f}")
+
+
+def published_table(runs, bench, calibration, score, decision):
+    """Prints each run as published (ECE, recall@100%P / AP, precision / recall at the decision) as a
+    Markdown table and returns the figures of each."""
+    print("| descriptor | sequence | step | scored | ECE | recall@100%P / AP | precision / recall at the decision |")
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for r in runs:
+        c = calibration.calibration(r["seq"], r["csv"])
+        s = score_json(bench, r["seq"], r["csv"])
+        m = at_decision(scored_best(score, r["seq"], r["csv"]), len(r["queries"]), decision)
+        prec = "–" if math.isnan(m["precision_at_decision"]) else f"{m['precision_at_decision']:.3f}"
+        print(f"| {r['descriptor']} | {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | {c['scored']} | "
+              f"{c['ece']:.3f} | {s['recall_at_100_precision']:.3f} / {s['average_precision']:.3f} | {prec} ({m['wrong_at_decision']} wrong) / "
+              f"{m['recall_at_decision']:.3f} |")
+        rows.append({"ece": c["ece"], **s, **m})
+    return rows
 
 
 def default_decision():
@@ -156,10 +189,15 @@ def plot(folder, runs, score):
     panels = {}
     for r in runs:
         scored = scored_best(score, r["seq"], r["csv"])
+        if r.get("held_out"):  # apart: what the probability does on scenes it was not fitted on
+            panels.setdefault(("held_out", f"{r['label']}, never fitted"), []).extend(scored)
+            continue
         panels.setdefault(("kind", r["label"]), []).extend(scored)
         panels.setdefault(("descriptor", r["descriptor"]), []).extend(scored)
-    for group in ("kind", "descriptor"):
+    for group in ("kind", "descriptor", "held_out"):
         names = [n for g, n in panels if g == group]
+        if not names:
+            continue
         cols = min(4, len(names))
         rows = (len(names) + cols - 1) // cols
         fig, axes = plt.subplots(rows, cols, figsize=(2.8 * cols, 2.9 * rows), dpi=110, squeeze=False)

@@ -13,6 +13,20 @@ mild_install_deps() {
   "$REPO/scripts/install_deps.sh"
 }
 
+# A sequence rendered by ../shared/bench/generator/gen.py into $1/$2, once (the cache outlives the
+# build): $1 the cache, $2 its name, the rest gen.py's arguments. Needs BENCH.
+mild_render_generated() {
+  local cache=$1 name=$2
+  shift 2
+  [[ -f "$cache/$name/gt_loops.txt" ]] && return 0
+  echo "[mild_lcd] rendering $name into $cache (once)" >&2
+  rm -rf "$cache/tmp_$name"
+  (cd "$BENCH/generator" && /usr/bin/python3 gen.py "$@" --out "$cache/tmp_$name" >"$cache/$name.log" 2>&1) \
+    || { echo "[mild_lcd] gen.py failed for $name (see $cache/$name.log)" >&2; return 1; }
+  mv "$(find "$cache/tmp_$name" -name gt_loops.txt -printf '%h\n' | head -n 1)" "$cache/$name"
+  rm -rf "$cache/tmp_$name"
+}
+
 mild_configure_and_build() {
   mkdir -p "$BUILD_DIR" "$ROS_HOME"
   # Debian's ROS tools need the system python, not the pyenv one first on PATH (ros-recipe gotcha 1/2).
