@@ -7,7 +7,7 @@
 # prints: the ECE of each run by the bench's referee (../shared/bench/calibration.py), the ECE and
 # accuracy of each run with the scorer refitted without its kind (real frames, each render kind,
 # each descriptor, each step) and the reliability diagrams per kind (docs/reliability_*.png).
-#   ./scripts/bench_calibration.sh                          # everything (about 30 minutes on two cores)
+#   ./scripts/bench_calibration.sh                          # everything (about 45 minutes on two cores)
 #   DESCRIPTORS=orb STEPS=1,2 ./scripts/bench_calibration.sh
 #   CONFIG=my.yaml ./scripts/bench_calibration.sh           # another configuration (features/type is set per descriptor)
 #   FIT=1 ./scripts/bench_calibration.sh                    # also print the scorer fitted on every run (the default's)
