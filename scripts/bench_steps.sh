@@ -2,8 +2,8 @@
 # The keyframe-step table: accuracy where a SLAM front-end's users live, at every K-th frame of the
 # bench sequences (../shared/bench/subsample.py, the keyframe rates of ../shared/bench/PEERS_STEPS.md).
 # The five public rendered sequences at steps 1, 2, 5 and 10, the real ones at 1 and 2, and the
-# generated seeds 203 and 204 of every kind (rendered once into the cache; in the scorer's fit at
-# every step, so their out-of-sample figures are the kind-left-out ones of docs/accuracy.md) at step 5, each
+# generated seeds 203 and 204 of every kind (rendered once into the cache; not in the shipped scorer's
+# fit, which used the public five and the real sequences only) at step 5, each
 # with the default configuration, scored by the rules of EVALUATION.md, beside the 2017 code's
 # better variant and the best peer of PEERS.md / PEERS_STEPS.md and beside mild_lcd's own
 # similarity top-1 (each query's most similar eligible keyframe, from --similarity): what the
