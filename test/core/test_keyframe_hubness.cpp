@@ -177,6 +177,33 @@ TEST(HubCorrectedFilter, ResetForgetsTheHubs) {
   EXPECT_EQ(a->update(similarityAt(3)), fresh->update(similarityAt(3)));
 }
 
+TEST(HubCorrectedFilter, TheMapsMemoryCountsTheFilterAndItsHubness) {
+  // memory_bytes (mild_offline --stats, the nodelet's diagnostics) is the map's: the filter's state
+  // is part of it, and the correction's histograms (KeyframeHubness::kBins counts per keyframe) too.
+  std::unique_ptr<TemporalFilter> plain = makeTemporalFilter(FilterParams{});
+  std::unique_ptr<TemporalFilter> corrected = makeTemporalFilter(withHubness(5));
+  for (int t = 0; t < 10; ++t) {
+    plain->update(similarityAt(t));
+    corrected->update(similarityAt(t));
+  }
+  EXPECT_GE(plain->memoryBytes(), 3 * kKeyframes * sizeof(double)) << "posterior, prior, probability";
+  EXPECT_GE(corrected->memoryBytes(), plain->memoryBytes() + kKeyframes * KeyframeHubness::kBins * sizeof(uint16_t));
+
+  DetectorParams params = test::fixtureParams();
+  LoopDetector without(params);
+  params.filter.hubness_min_queries = 3;
+  LoopDetector with(params);
+  for (size_t i = 0; i < test::fixtureFrames().size(); ++i) {
+    processImage(without, test::fixtureFrames()[i], PixelFormat::kGray, 0.5 * i);
+    processImage(with, test::fixtureFrames()[i], PixelFormat::kGray, 0.5 * i);
+  }
+  const size_t filtered = with.map().filter().stateKeyframes();
+  ASSERT_GT(filtered, 0u);
+  EXPECT_GE(with.map().memoryBytes(),
+            without.map().memoryBytes() + filtered * KeyframeHubness::kBins * sizeof(uint16_t));
+  EXPECT_GE(without.map().memoryBytes(), without.map().database().memoryBytes() + without.map().filter().memoryBytes());
+}
+
 TEST(HubCorrectedFilter, TheDetectorDrawsCandidatesFromWhatTheFilterWeighed) {
   DetectorParams params = test::fixtureParams();
   params.filter.hubness_min_queries = 3;

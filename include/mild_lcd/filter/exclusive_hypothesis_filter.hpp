@@ -112,6 +112,7 @@ class ExclusiveHypothesisFilter : public TemporalFilter {
   void setState(std::vector<double> posterior, double no_loop);
   std::vector<uint8_t> saveState() const override;
   void loadState(const std::vector<uint8_t>& bytes) override;
+  size_t memoryBytes() const override;
 
  private:
   Params params_;

@@ -30,6 +30,9 @@ class HubCorrectedFilter : public TemporalFilter {
   // The wrapped filter's state, then the hubness: u64 size of the first, its bytes, the hubness's.
   std::vector<uint8_t> saveState() const override;
   void loadState(const std::vector<uint8_t>& bytes) override;
+  size_t memoryBytes() const override {
+    return filter_->memoryBytes() + hubness_.memoryBytes() + evidence_.capacity() * sizeof(double);
+  }
 
  private:
   std::unique_ptr<TemporalFilter> filter_;

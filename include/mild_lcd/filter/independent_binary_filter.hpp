@@ -52,6 +52,7 @@ class IndependentBinaryFilter : public TemporalFilter {
   void reset() override { probability_.clear(); }
   std::vector<uint8_t> saveState() const override;
   void loadState(const std::vector<uint8_t>& bytes) override;
+  size_t memoryBytes() const override { return (probability_.capacity() + previous_.capacity()) * sizeof(double); }
 
  private:
   Params params_;

@@ -45,6 +45,9 @@ class KeyframeHubness {
   void readState(const uint8_t* data, size_t size);
   // The size of the state of `keyframes` keyframes.
   static size_t stateBytes(size_t keyframes);
+  size_t memoryBytes() const {
+    return bins_.capacity() * sizeof(Histogram::value_type) + counts_.capacity() * sizeof(uint32_t);
+  }
 
  private:
   using Histogram = std::vector<uint16_t>;  // kBins counts per keyframe, contiguous

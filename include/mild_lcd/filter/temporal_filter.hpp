@@ -37,6 +37,9 @@ class TemporalFilter {
   // filter that corrects its input: HubCorrectedFilter); nullptr when it is the similarity. The
   // detector draws its candidates and their saliency from the same values the filter weighed.
   virtual const std::vector<double>* evidence() const { return nullptr; }
+  // The bytes its state holds (a few numbers per keyframe: the map's memory counts them beside the
+  // database's).
+  virtual size_t memoryBytes() const = 0;
 
   // The state as bytes and back, bit-exact (a resumed run continues exactly). loadState throws
   // InvalidInput, changing nothing, for bytes that are not a state of this filter.

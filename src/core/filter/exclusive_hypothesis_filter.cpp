@@ -109,4 +109,10 @@ const std::vector<double>& ExclusiveHypothesisFilter::update(const std::vector<d
   return windowed_;
 }
 
+size_t ExclusiveHypothesisFilter::memoryBytes() const {
+  return (kernel_.capacity() + posterior_.capacity() + prior_.capacity() + windowed_.capacity() +
+          saliency_.capacity()) *
+         sizeof(double);
+}
+
 }  // namespace mild

@@ -51,7 +51,7 @@ Features KeyframeMap::features(KeyframeIndex k) const {
 
 size_t KeyframeMap::memoryBytes() const {
   size_t bytes = contents_.database.memoryBytes() + contents_.records.capacity() * sizeof(KeyframeRecord) +
-                 contents_.clock.times().capacity() * sizeof(double);
+                 contents_.clock.times().capacity() * sizeof(double) + contents_.filter->memoryBytes();
   for (const auto& r : contents_.records) bytes += r.keypoints.capacity() * sizeof(cv::KeyPoint);
   return bytes + contents_.index_of_id.size() * (sizeof(uint64_t) + sizeof(KeyframeIndex) + 2 * sizeof(void*));
 }
