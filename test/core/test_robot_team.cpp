@@ -71,6 +71,10 @@ TEST(RobotTeam, TwoRobotsFindTheLoopsBetweenTheirMapsAsOneRobotDoes) {
   EXPECT_EQ(team.robot(0).map().size(), static_cast<size_t>(kHalf));
   EXPECT_EQ(team.robot(1).map().size(), static_cast<size_t>(kHalf));
   EXPECT_EQ(team.keyframes(), static_cast<size_t>(kFrames));
+  // The memory the diagnostics report: both maps, and the filters between them (each as long as the
+  // map it looks into).
+  EXPECT_GE(team.memoryBytes(), team.robot(0).map().memoryBytes() + team.robot(1).map().memoryBytes() +
+                                    static_cast<size_t>(kHalf) * 3 * sizeof(double));
 
   const Metrics lone_m = evaluate(truth, lone_pairs, 40);
   const Metrics team_m = evaluate(truth, team_pairs, 40);

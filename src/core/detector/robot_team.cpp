@@ -163,6 +163,11 @@ size_t RobotTeam::features() const {
 size_t RobotTeam::memoryBytes() const {
   size_t n = 0;
   for (const auto& r : robots_) n += r->map().memoryBytes();
+  // The filters between maps each hold a state as long as the map they look into.
+  for (const auto& f : pair_filters_) n += f ? f->memoryBytes() : 0;
+  for (const auto& [remote, filters] : remote_filters_) {
+    for (const auto& f : filters) n += f->memoryBytes();
+  }
   return n;
 }
 
