@@ -194,11 +194,18 @@ def plot(folder, runs, score):
             continue
         panels.setdefault(("kind", r["label"]), []).extend(scored)
         panels.setdefault(("descriptor", r["descriptor"]), []).extend(scored)
-    for group in ("kind", "descriptor", "held_out"):
+        # Each kind with each descriptor: a row per kind, a column per descriptor.
+        panels.setdefault(("kind_and_descriptor", (r["label"], r["descriptor"])), []).extend(scored)
+    descriptors = list(dict.fromkeys(r["descriptor"] for r in runs if not r.get("held_out")))
+    for group in ("kind", "descriptor", "held_out", "kind_and_descriptor"):
         names = [n for g, n in panels if g == group]
         if not names:
             continue
         cols = min(4, len(names))
+        if group == "kind_and_descriptor":  # kind-major, descriptors in the order they were run
+            kinds = list(dict.fromkeys(k for k, _ in names))
+            names.sort(key=lambda n: (kinds.index(n[0]), descriptors.index(n[1])))
+            cols = len(descriptors)
         rows = (len(names) + cols - 1) // cols
         fig, axes = plt.subplots(rows, cols, figsize=(2.8 * cols, 2.9 * rows), dpi=110, squeeze=False)
         for ax in axes.flat[len(names):]:
@@ -222,7 +229,8 @@ def plot(folder, runs, score):
             ax.plot(xs, ys, "o-", color="tab:blue", ms=3)
             for x, y, c in zip(xs, ys, ns):
                 ax.annotate(str(c), (x, y), textcoords="offset points", xytext=(2, -9), fontsize=6)
-            ax.set_title(f"{n}: {len(scored)} queries\nECE {ece_of(scored):.3f}", fontsize=8)
+            title = ", ".join(n) if isinstance(n, tuple) else n
+            ax.set_title(f"{title}: {len(scored)} queries\nECE {ece_of(scored):.3f}", fontsize=8)
             ax.set_xlim(0, 1)
             ax.set_ylim(0, 1.02)
             ax.tick_params(labelsize=6)
