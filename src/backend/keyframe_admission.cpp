@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <set>
+#include <tuple>
 
 namespace mild::backend {
 namespace {
@@ -39,6 +41,21 @@ bool KeyframeAdmission::addOdometry(int64_t stamp_ns, const Eigen::Vector3d& pos
   return true;
 }
 
+void KeyframeAdmission::boundLoops(KeyframeInput& keyframe) {
+  // One loop per candidate keyframe, the first given, and at most kMaxLoopsPerKeyframe: the waiting
+  // room bounds keyframes, this bounds what each may bring (every loop is a residual of each solve).
+  std::set<std::tuple<std::string, uint32_t, uint64_t>> seen;
+  std::vector<LoopInput> kept;
+  for (LoopInput& loop : keyframe.loops) {
+    if (kept.size() >= kMaxLoopsPerKeyframe || !seen.emplace(loop.robot, loop.session, loop.candidate).second) {
+      ++counters_.loops_refused;
+      continue;
+    }
+    kept.push_back(std::move(loop));
+  }
+  keyframe.loops = std::move(kept);
+}
+
 void KeyframeAdmission::addKeyframe(KeyframeInput keyframe, int64_t now_ns) {
   ++counters_.received;
   if (!robot_known_) {
@@ -54,6 +71,7 @@ void KeyframeAdmission::addKeyframe(KeyframeInput keyframe, int64_t now_ns) {
     ++counters_.dropped_future_stamp;
     return;
   }
+  boundLoops(keyframe);
   if (waiting_.size() >= params_.max_waiting) {
     waiting_.pop_front();
     ++counters_.dropped_queue_full;
@@ -120,6 +138,7 @@ void KeyframeAdmission::addCountersTo(BackendCounters& c) const {
   c.dropped_queue_full += counters_.dropped_queue_full;
   c.odometry_rejected += counters_.odometry_rejected;
   c.tf_rejected += counters_.tf_rejected;
+  c.loops_refused += counters_.loops_refused;
 }
 
 }  // namespace mild::backend

@@ -61,7 +61,9 @@ std::vector<ScoredPair> loadCandidates(const std::string& path) {
   if (!in) throw InvalidInput(path + ": cannot open the candidates file");
   std::vector<ScoredPair> out;
   std::string line;
+  size_t line_number = 0;
   while (std::getline(in, line)) {
+    ++line_number;
     std::replace(line.begin(), line.end(), ',', ' ');
     std::istringstream row(line);
     std::string a, b, c;
@@ -69,9 +71,16 @@ std::vector<ScoredPair> loadCandidates(const std::string& path) {
     try {
       size_t ua = 0, ub = 0, uc = 0;
       ScoredPair p{std::stoi(a, &ua), std::stoi(b, &ub), std::stod(c, &uc)};
-      if (ua == a.size() && ub == b.size() && uc == c.size()) out.push_back(p);
-    } catch (const std::exception&) {
-      // a header row, as score.py skips it
+      if (ua == a.size() && ub == b.size() && uc == c.size()) {
+        // A score that is not a number cannot be ranked: refused, not guessed at.
+        if (!std::isfinite(p.score)) {
+          throw InvalidInput(path + ":" + std::to_string(line_number) + ": the score '" + c +
+                             "' is not a finite number");
+        }
+        out.push_back(p);
+      }
+    } catch (const std::logic_error&) {
+      // a header row, as score.py skips it (std::stoi / std::stod throw invalid_argument or out_of_range)
     }
   }
   return out;
@@ -80,7 +89,7 @@ std::vector<ScoredPair> loadCandidates(const std::string& path) {
 std::vector<ScoredPair> bestPerQuery(const std::vector<ScoredPair>& candidates, int min_gap) {
   std::map<int, ScoredPair> best;
   for (const ScoredPair& c : candidates) {
-    if (c.query - c.candidate < min_gap) continue;
+    if (static_cast<int64_t>(c.query) - static_cast<int64_t>(c.candidate) < min_gap) continue;
     auto it = best.find(c.query);
     if (it == best.end() || c.score > it->second.score) best[c.query] = c;
   }
@@ -101,7 +110,8 @@ Metrics evaluate(const GroundTruth& truth, const std::vector<ScoredPair>& candid
   const double loop_queries = static_cast<double>(std::max<size_t>(1, m.loop_queries));
   for (size_t k = 0; k < ranked.size();) {
     const double score = ranked[k].score;
-    for (; k < ranked.size() && ranked[k].score == score; ++k) {
+    // Each step takes at least one pair, so that the walk ends whatever the scores compare like.
+    for (size_t first = k; k < ranked.size() && (k == first || ranked[k].score == score); ++k) {
       const std::pair<int, int> pair(ranked[k].query, ranked[k].candidate);
       if (truth.right.count(pair)) {
         ++m.true_positives;

@@ -1,6 +1,7 @@
 // mild_offline: runs the loop-closure pipeline over an image sequence, writes the candidates CSV,
 // and optionally scores it against ground truth, plots it and reports per-stage timing.
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -52,11 +53,20 @@ struct Options {
   int stats_window = 1000;
 };
 
-// Reads one frame as 8-bit grey, BGR or BGRA; nullopt when the file cannot be decoded.
+// The most pixels a frame may have after --scale (OpenCV's own limit on a decoded image).
+constexpr double kMaxScaledPixels = 1024.0 * 1024.0 * 1024.0;
+
+// Reads one frame as 8-bit grey, BGR or BGRA; nullopt when the file cannot be decoded, or when
+// --scale would make it empty or larger than kMaxScaledPixels (that frame alone is skipped).
 std::optional<std::pair<cv::Mat, mild::PixelFormat>> readFrame(const std::string& path, double scale) {
   cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
   if (image.empty()) return std::nullopt;
-  if (scale != 1.0) cv::resize(image, image, cv::Size(), scale, scale, scale > 1.0 ? cv::INTER_LINEAR : cv::INTER_AREA);
+  if (scale != 1.0) {
+    const double cols = std::round(image.cols * scale), rows = std::round(image.rows * scale);
+    if (cols < 1.0 || rows < 1.0 || cols * rows > kMaxScaledPixels) return std::nullopt;
+    cv::resize(image, image, cv::Size(static_cast<int>(cols), static_cast<int>(rows)), 0, 0,
+               scale > 1.0 ? cv::INTER_LINEAR : cv::INTER_AREA);
+  }
   if (image.depth() == CV_16U) image.convertTo(image, CV_8U, 1.0 / 256.0);
   if (image.depth() != CV_8U) return std::nullopt;
   if (const auto format = mild::decodedPixelFormat(image.channels())) return std::make_pair(image, *format);

@@ -224,6 +224,32 @@ TEST(BackendInputs, LoopMeasurementNonFiniteOrAbsurdIsRefusedAndCounted) {
   EXPECT_LT(r.ate_corrected, 0.3 * r.ate_raw) << "every later loop is still used";
 }
 
+// A LoopClosure carrying a hundred thousand copies of one loop once made as many residuals in every
+// solve, and the waiting room bounds keyframes, not their size: one loop per candidate is kept, at
+// most kMaxLoopsPerKeyframe, the rest refused and counted.
+TEST(BackendInputs, ALoopRepeatedOrPastTheBoundInOneKeyframeIsRefusedAndCounted) {
+  Replay r;
+  size_t spoiled = 0;
+  r.spoil_keyframe = [&spoiled](size_t, KeyframeInput& k) {
+    if (k.loops.empty() || spoiled++ > 0) return;
+    const LoopInput loop = k.loops.front();
+    k.loops.assign(100000, loop);          // copies of the one loop
+    for (uint64_t n = 0; n < 1000; ++n) {  // and loops to a thousand keyframes the graph does not hold
+      LoopInput other = loop;
+      other.candidate = 1000000000 + n;
+      k.loops.push_back(other);
+    }
+  };
+  r.run();
+  ASSERT_NO_FATAL_FAILURE(r.expectSaneResult());
+  EXPECT_EQ(r.counters.loops_refused, 100000u + 1000u - KeyframeAdmission::kMaxLoopsPerKeyframe);
+  EXPECT_EQ(r.counters.loops_skipped, KeyframeAdmission::kMaxLoopsPerKeyframe - 1) << "the kept ones find no keyframe";
+  EXPECT_EQ(r.counters.in_graph, r.truth.size());
+  Replay clean;
+  clean.run();
+  EXPECT_EQ(r.loops.size(), clean.loops.size()) << "one loop of the copies, as without them";
+}
+
 TEST(BackendInputs, KeyframeStampedAnHourAheadDoesNotHoldBackTheOnesAfterIt) {
   Replay r;
   r.spoil_keyframe = [](size_t i, KeyframeInput& k) {

@@ -143,6 +143,29 @@ TEST(CandidateScorer, RejectsAWeightVectorOfAnotherLength) {
   EXPECT_THROW(CandidateScorer{params}, InvalidInput);
 }
 
+// Weights so large that two terms overflow to -inf and +inf made the probability NaN, which sorts
+// candidates undefinedly and was published: they are refused, and the largest accepted ones give a
+// probability on the most extreme evidence.
+TEST(CandidateScorer, WeightsBeyondAnyFitAreRefusedAndTheLargestGiveAProbability) {
+  ScoringParams params;
+  params.weights = {1e308, 1e308, 0.0};
+  EXPECT_THROW(CandidateScorer{params}, InvalidInput);
+  params.weights = {0.669, 0.726, 0.778};
+  params.bias = -1e308;
+  EXPECT_THROW(CandidateScorer{params}, InvalidInput);
+  params.weights = {1000, 1000, -1000};
+  params.bias = -1000;
+  const CandidateScorer scorer(params);
+  Verification strongest = checked(100000, true, 100000);
+  strongest.log10_false_alarms = -1e300;
+  for (const auto& e : {ev(0.0, 1e300), ev(1.0, 0.0), ev(0.5, 1e300, 1000000)}) {
+    for (const Verification& v : {strongest, checked(0, false), checked(100, true)}) {
+      const double p = scorer.probability(e, v);
+      EXPECT_TRUE(p >= 0.0 && p <= 1.0) << p;
+    }
+  }
+}
+
 // The scorer's weights belong to the filter they were fitted with: switching filter/type alone
 // would publish miscalibrated probabilities, so the configuration is refused, naming both.
 TEST(CandidateScorer, AScorerFittedForAnotherFilterIsRefused) {

@@ -69,6 +69,11 @@ TEST_F(Confinement, EscapesAreRefused) {
   expectRefused(dir, std::string("map\0.db", 7), "NUL");
   expectRefused(dir, std::string(300, 'x'), "255 bytes");
   expectRefused(dir, std::string(5000, 'x'), "4096");
+  // A team station's ledger and its temporary file, as a file or a folder on the way.
+  expectRefused(dir, "alpha.team_ledger.json", "team station");
+  expectRefused(dir, "alpha.team_ledger.json.writing/x", "team station");
+  expectRefused(dir, "site/beta.team_ledger.json.writing", "team station");
+  EXPECT_FALSE(fs::exists(fs::path(root_) / "alpha.team_ledger.json.writing")) << "no folder made";
   EXPECT_FALSE(fs::exists(base_ / "outside" / "x")) << "nothing is created outside";
 }
 

@@ -111,6 +111,36 @@ TEST(Evaluation, MalformedGroundTruthNamesFileAndLine) {
   EXPECT_THROW(loadCandidates("/nonexistent/candidates.csv"), InvalidInput);
 }
 
+TEST(Evaluation, AScoreThatIsNotANumberIsRefusedNamingTheLine) {
+  // A NaN never equals itself: it once stopped the ranking's walk from advancing (an endless loop
+  // growing the curve until memory ran out).
+  const fs::path path = fs::temp_directory_path() / "mild_nan_candidates.csv";
+  for (const char* score : {"nan", "inf", "-inf"}) {
+    std::ofstream(path) << "query,candidate,score\n100,1,0.5\n101,2," << score << "\n";
+    try {
+      loadCandidates(path.string());
+      FAIL() << score;
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string() + ":3"), std::string::npos) << e.what();
+    }
+  }
+  // Given directly, the walk still ends, and every pair is counted once.
+  GroundTruth truth;
+  truth.right = {{100, 1}};
+  truth.loop_queries = {100};
+  const Metrics m = evaluate(truth, {{100, 1, std::nan("")}, {101, 2, std::nan("")}, {102, 3, 0.5}}, 40);
+  EXPECT_EQ(m.scored_queries, 3u);
+  EXPECT_EQ(m.true_positives + m.false_positives, 3u);
+  EXPECT_LE(m.curve.size(), 3u);
+}
+
+TEST(Evaluation, FrameNumbersAtTheEndsOfTheirRangeDoNotOverflowTheGap) {
+  const auto best = bestPerQuery({{2147483647, -1, 0.5}, {-2147483647 - 1, 1, 0.5}, {100, 10, 0.4}}, 40);
+  ASSERT_EQ(best.size(), 2u);  // the first is 2^31 frames apart; the second is before its candidate
+  EXPECT_EQ(best[0].query, 100);
+  EXPECT_EQ(best[1].query, 2147483647);
+}
+
 TEST(Evaluation, ScoresSurviveTheCsvRoundTrip) {
   for (double s : {0.123456789012, 1e-9, 0.99999999, 1.0, 0.0}) {
     EXPECT_NEAR(std::stod(formatScore(s)), s, 1e-10 * std::max(1.0, s));

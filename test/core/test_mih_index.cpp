@@ -114,6 +114,21 @@ TEST(MihIndex, DiscardsBucketsOverTheirCapAndStopsGrowingThem) {
   EXPECT_EQ(visited(index, other), (std::set<FeatureId>{7}));
 }
 
+// A factor meant as "no cap" (beyond size_t's range once multiplied) once converted to 0 and left
+// every bucket at the floor: now it caps nothing a map can hold.
+TEST(MihIndex, AHugeCapFactorCapsNothing) {
+  MihParams p;
+  p.num_tables = 16;
+  p.min_bucket_cap = 5;
+  p.bucket_cap_factor = 1e300;
+  p.max_bucket_entries = 0;
+  MihIndex index(p, kOrbBits);
+  Descriptor common;
+  for (FeatureId k = 0; k < 50; ++k) index.insertKeyframe(&common, 1, k);
+  EXPECT_EQ(index.discardedBuckets(), 0u);
+  EXPECT_EQ(visited(index, common).size(), 50u);
+}
+
 TEST(MihIndex, DefaultCapFollowsThePaperFormula) {
   // N_buckets = 50 * N_features / 2^16 with N_features = 1.31M gives 1000 entries.
   MihParams p;

@@ -200,6 +200,18 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
 
 // A remote robot's filters into this team's maps are the team's to keep consistent: a map
 // replaced (RobotTeam::mapChanged) or all reset starts them over, as it does the robots' own pairs.
+// A decider that can no longer send some loops (it restarted): they are counted taken at once,
+// whatever their number (one step each once stalled a station for a peer's false 2^62), never back.
+TEST(StationLedger, LoopsADeciderCanNoLongerSendAreSkippedAtOnce) {
+  StationLedger ledger("alpha", 1);
+  ledger.tookLoop("bravo");
+  ledger.skipLoopsReceivedTo("bravo", uint64_t{1} << 62);
+  EXPECT_EQ(ledger.loopsReceivedFrom("bravo"), uint64_t{1} << 62);
+  ledger.skipLoopsReceivedTo("bravo", 5);
+  EXPECT_EQ(ledger.loopsReceivedFrom("bravo"), uint64_t{1} << 62) << "never back";
+  EXPECT_EQ(ledger.loopsReceivedFrom("charlie"), 0u);
+}
+
 TEST(RobotTeamRemote, AMapChangedStartsTheRemoteRobotsFiltersOver) {
   const DetectorParams params;
   const FeatureFrontEnd front_end(params.features);

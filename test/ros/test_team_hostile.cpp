@@ -19,6 +19,7 @@
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/PlaceSummary.h"
 #include "mild_lcd/TeamFeatures.h"
+#include "mild_lcd/TeamLoop.h"
 #include "mild_lcd/TeamRequest.h"
 #include "mild_lcd/TeamStatus.h"
 #include "ros_test_support.hpp"
@@ -187,6 +188,61 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
     if (last.peers[i] == "mallory") {
       EXPECT_EQ(last.received[i], 0u) << "a malformed summary was taken";
     }
+  }
+}
+
+// Claims no honest peer can make: that it holds 2^62 of the station's summaries (numbering past them
+// once meant a ledger entry each, under the detector's lock) and that it can no longer send its
+// first 2^62 loops for the station (skipping them once took a step each: the station stalled). Both
+// are refused and counted; the station's own robot keeps being answered, its numbering unchanged.
+// (Runs after the test above, with the station's 150 keyframes stored.)
+TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  ros::NodeHandle nh;
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
+  ros::Publisher loop_pub = nh.advertise<mild_lcd::TeamLoop>("/mild_team/alpha/loops", 10);
+  ASSERT_TRUE(statuses.waitForPublisher(30.0));
+  ASSERT_TRUE(waitForSubscriber(loop_pub, 30.0)) << "the station does not listen for mallory's loops";
+  constexpr uint64_t kFar = uint64_t{1} << 62;
+  mild_lcd::TeamStatus claim;
+  claim.station = "mallory";
+  claim.descriptor_bytes = 32;
+  claim.peers = {"alpha"};
+  claim.received = {kFar};
+  claim.loops_received = {0};
+  claim.loops_from = {kFar};
+  for (int i = 0; i < 4; ++i) {
+    status_pub.publish(claim);
+    ros::WallDuration(0.25).sleep();
+  }
+  mild_lcd::TeamLoop loop;
+  loop.decider = "mallory";
+  loop.seq = kFar;
+  loop.loop.query_station = "alpha";
+  loop.loop.query_robot = "robot1";
+  loop.loop.query_id = sample.front().id;
+  loop_pub.publish(loop);
+  ros::WallDuration(0.5).sleep();
+
+  // Twenty more keyframes of the station's own robot (new ids, later stamps): every one answered.
+  std::vector<mild_lcd::Keyframe> more(sample.begin(), sample.begin() + 20);
+  for (auto& k : more) {
+    k.id += 1000000;
+    k.header.stamp += ros::Duration(1000.0);
+  }
+  const std::vector<double> answered = answerTimes(more, 0, more.size(), 5.0);
+  EXPECT_EQ(answered.size(), more.size()) << "the station stalled";
+  ros::WallDuration(2.5).sleep();  // its next heartbeats
+  mild_lcd::TeamStatus last;
+  for (const auto& s : statuses.messages()) {
+    if (s.station == "alpha") last = s;
+  }
+  ASSERT_EQ(last.station, "alpha");
+  EXPECT_EQ(last.summaries, 170u) << "the station numbered its keyframes past a peer's false claim";
+  for (size_t i = 0; i < last.peers.size(); ++i) {
+    if (last.peers[i] != "mallory") continue;
+    EXPECT_LT(last.loops_received[i], 1000u) << "a false claim of lost loops was taken";
   }
 }
 

@@ -59,6 +59,8 @@ TEST(Tuning, StartsFromTheNodesValuesAndAppliesChangesBetweenKeyframes) {
   change.doubles.clear();
   change.ints[0].value = 2;
   ASSERT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 2);
+  change.ints[0].value = 2147483647;  // each candidate is verified: the count is bounded
+  EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 100) << "clamped to the cfg's maximum";
   change.ints[0].value = 0;
   EXPECT_EQ(valueOf(reconfigure(change).ints, "detector_max_candidates").value, 1) << "clamped to the cfg's minimum";
 

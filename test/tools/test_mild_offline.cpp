@@ -218,6 +218,27 @@ TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {
   EXPECT_EQ(csv.find("\n5,"), std::string::npos) << csv;
 }
 
+// --scale that shrinks one frame to nothing once stopped the whole run (an OpenCV exception from
+// resizing to an empty size): that frame alone is skipped, as an unreadable one is.
+TEST_F(MildOffline, AFrameScaledToNothingIsSkippedAlone) {
+  // Frames 0..11 of the fixture (320 x 240), frame 5 a 3 x 3 grey image: at --scale 0.1 it has no pixel.
+  for (int i = 0; i < 12; ++i) {
+    char name[32];
+    if (i == 5) {
+      std::ofstream(path("000005.pgm"), std::ios::binary) << "P5\n3 3\n255\n" << std::string(9, '\x80');
+      continue;
+    }
+    std::snprintf(name, sizeof(name), "%06d.jpg", i);
+    fs::copy_file(kFixture + "/images/" + name, path(name));
+  }
+  std::ofstream(path("config.yaml")) << "detector:\n  exclusion_frames: 8\n  near_past: false\n";
+  const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv") + " --config " +
+                                        path("config.yaml") + " --scale 0.1");
+  ASSERT_EQ(run.status, 0) << run.output;
+  EXPECT_NE(run.output.find("000005.pgm"), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("processed 11 of 12 frames"), std::string::npos) << run.output;
+}
+
 TEST_F(MildOffline, EmptyFolderIsAClearError) {
   const ProcessResult run = mildOffline("--images " + dir_.string() + " --output " + path("c.csv"));
   EXPECT_NE(run.status, 0);

@@ -29,7 +29,7 @@ struct BackendCounters {
   // Loops.
   uint64_t loops_kept = 0;      // in the graph and inliers after the last solve
   uint64_t loops_rejected = 0;  // in the graph, outliers after the last solve (the robust loss holds them)
-  uint64_t loops_refused = 0;   // measurement non-finite or absurd: never added
+  uint64_t loops_refused = 0;   // measurement non-finite or absurd, or a keyframe's copy or excess: never added
   uint64_t loops_skipped = 0;   // another robot's or another session's keyframe, or one not in the graph
   // Solves.
   uint64_t solves = 0;

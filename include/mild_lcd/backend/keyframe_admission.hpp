@@ -73,8 +73,12 @@ class KeyframeAdmission {
 
   // A keyframe arriving at now_ns (the clock; 0 when it has not started: no future check). Dropped
   // at once, counted, when it is another robot's or stamped beyond max_future_stamp; the oldest
-  // waiting keyframe is dropped when max_waiting are waiting.
+  // waiting keyframe is dropped when max_waiting are waiting. Of its loops, a second one to the same
+  // candidate keyframe and any beyond kMaxLoopsPerKeyframe are refused (counted in loops_refused).
   void addKeyframe(KeyframeInput keyframe, int64_t now_ns);
+  // Far more than the detector reports for one keyframe (detector/max_candidates and
+  // detector/similarity_candidates, each at most 100).
+  static constexpr size_t kMaxLoopsPerKeyframe = 256;
 
   // Every keyframe, oldest first, whose pose is known: with the odometry topic, interpolated
   // between the samples around its stamp; with pose_at (tf), from it. Stops at the first that must
@@ -83,7 +87,7 @@ class KeyframeAdmission {
   std::vector<ReadyKeyframe> takeReady(int64_t now_ns, const PoseAt& pose_at = nullptr);
 
   // The counters this stage owns: received, waiting, dropped (no odometry, future stamp, invalid
-  // pose, other robot, queue full) and odometry_rejected.
+  // pose, other robot, queue full), odometry_rejected and the loops it refused.
   void addCountersTo(BackendCounters& counters) const;
   const std::string& robot() const { return robot_; }
 
@@ -93,6 +97,7 @@ class KeyframeAdmission {
     int64_t arrival_ns = 0;
   };
   std::optional<Pose2> odometryAt(int64_t stamp_ns, bool& give_up) const;
+  void boundLoops(KeyframeInput& keyframe);
 
   AdmissionParams params_;
   std::string robot_;

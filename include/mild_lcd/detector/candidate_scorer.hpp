@@ -48,11 +48,11 @@ struct ScoringParams {
       "likelihood so that it is P(a true loop). A candidate that fails verification keeps its probability, "
       "capped just below decision_probability, and accepted is exactly probability >= decision_probability. Off "
       "(or verification off) gives the filter's probability as it is.");
-    v("weights", p.weights, Bounds::list(kFeatures, kFeatures, Bounds::any()),
+    v("weights", p.weights, Bounds::list(kFeatures, kFeatures, Bounds::in(-1000, 1000)),
       "Fitted by scripts/fit_scoring.py on ORB runs of the sequences docs/accuracy.md names, real frames "
       "included, at keyframe steps 1, 2, 5 and 10; cross-validated leaving out whole kinds and whole steps, "
       "and measured unchanged on BRISK and AKAZE, which it was not fitted on (scripts/bench_calibration.sh).");
-    v("bias", p.bias, Bounds::any(), "The model's intercept.");
+    v("bias", p.bias, Bounds::in(-1000, 1000), "The model's intercept.");
     v("filter_type", p.filter_type, Bounds::oneOf(temporalFilterTypes()),
       "The filter/type the weights were fitted with. The filter's probability is one of the model's inputs and "
       "another filter's means something else, so a configuration whose filter/type differs is refused (refit "

@@ -52,9 +52,10 @@ struct CandidateParams {
       "How far a keyframe's matched count must rise above the valley to end the band, in units of the "
       "valley's square root (the spread of a count). Chosen by cross-validation over kinds and keyframe steps "
       "(docs/accuracy.md).");
-    v("max_candidates", p.max_candidates, Bounds::atLeast(1).runtime(),
-      "Up to this many candidates per keyframe are reported, best first by their published probability.");
-    v("similarity_candidates", p.similarity_candidates, Bounds::atLeast(0).runtime(),
+    v("max_candidates", p.max_candidates, Bounds::in(1, 100).runtime(),
+      "Up to this many candidates per keyframe are reported, best first by their published probability (each is "
+      "verified: the bound keeps a keyframe's work bounded).");
+    v("similarity_candidates", p.similarity_candidates, Bounds::in(0, 100).runtime(),
       "Besides the max_candidates best keyframes of the temporal filter, this many of the most similar "
       "keyframes are verified and scored too (local maxima at least suppression_radius apart), so that a "
       "keyframe with strong evidence is judged on it even when the filter's belief sits elsewhere. The best "

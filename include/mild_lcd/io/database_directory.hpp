@@ -57,6 +57,13 @@ class ConfinedFile {
 // (ConfinedFile::replace): such names are refused as map names, so that only a save makes them.
 bool isTemporaryFileName(const std::string& name);
 
+// What a station of a team across hosts saves beside its maps: "<station>" + kTeamLedgerSuffix,
+// written through that name + kTeamLedgerTemporarySuffix. No client-named path may use either, as
+// a file or as a folder (a folder by the temporary name once stopped every later save of the ledger).
+constexpr const char* kTeamLedgerSuffix = ".team_ledger.json";
+constexpr const char* kTeamLedgerTemporarySuffix = ".writing";
+bool isTeamLedgerName(const std::string& name);
+
 // A file named by an ordinary path, for tools and tests that trust their paths: the folder is
 // followed as given (symbolic links included); the file itself is still opened without following
 // a link.
@@ -78,7 +85,8 @@ struct DirectoryLimits {
 //   - no "..", no empty or "." components, no symbolic link at any level below the folder;
 //   - at most 4096 bytes, 255 per component (223 for the name of a file saved: its temporary
 //     file's name is 32 bytes longer), DirectoryLimits::max_depth folders deep;
-//   - not the name of a save's temporary file (isTemporaryFileName);
+//   - not the name of a save's temporary file (isTemporaryFileName), and no component the name of
+//     a team ledger or its temporary file (isTeamLedgerName);
 //   - saving within DirectoryLimits.
 // The folder itself is configured by the operator and may be a symbolic link.
 class DatabaseDirectory {

@@ -83,6 +83,8 @@ class StationLedger {
   // Loops a peer decided for this station's keyframes: taken contiguously, as summaries.
   uint64_t loopsReceivedFrom(const std::string& peer) const;
   void tookLoop(const std::string& peer);
+  // Counts peer's loops below `count` as taken (the decider can no longer send them: lost), at once.
+  void skipLoopsReceivedTo(const std::string& peer, uint64_t count);
 
   // The ledger as text (JSON), and back. fromText throws InvalidInput for text that is not a
   // ledger of this station with this many robots, changing nothing.

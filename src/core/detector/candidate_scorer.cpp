@@ -48,6 +48,9 @@ double CandidateScorer::probability(const Evidence& e, const Verification& v) co
   const std::vector<double> x = features(e, v);
   double z = params_.bias;
   for (int i = 0; i < kFeatures; ++i) z += params_.weights[i] * x[i];
+  // Bounded weights and inputs keep z finite; should it not be, no evidence beats the filter's own
+  // probability (a NaN would sort candidates undefinedly and be published).
+  if (!std::isfinite(z)) return e.filter_probability;
   return 1.0 / (1.0 + std::exp(-z));
 }
 

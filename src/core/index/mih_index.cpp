@@ -96,7 +96,10 @@ void MihIndex::clear() {
 size_t MihIndex::bucketCap(int t) const {
   const double n_features = static_cast<double>(std::max<uint64_t>(params_.expected_features, features_seen_));
   const double average = n_features / std::ldexp(1.0, layout_.length(t));
-  return std::max<size_t>(params_.min_bucket_cap, static_cast<size_t>(params_.bucket_cap_factor * average));
+  // A factor large enough to mean "no cap" must not wrap to a tiny one (a double beyond size_t's
+  // range has no defined conversion).
+  const double cap = std::min(params_.bucket_cap_factor * average, 0x1p62);
+  return std::max<size_t>(params_.min_bucket_cap, static_cast<size_t>(cap));
 }
 
 void MihIndex::insertKeyframe(const Descriptor* descriptors, size_t count, FeatureId first_id) {

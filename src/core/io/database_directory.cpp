@@ -162,6 +162,13 @@ bool isTemporaryFileName(const std::string& name) {
                      [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
 }
 
+bool isTeamLedgerName(const std::string& name) {
+  const auto ends_with = [&name](const std::string& tail) {
+    return name.size() >= tail.size() && name.compare(name.size() - tail.size(), tail.size(), tail) == 0;
+  };
+  return ends_with(kTeamLedgerSuffix) || ends_with(std::string(kTeamLedgerSuffix) + kTeamLedgerTemporarySuffix);
+}
+
 ConfinedFile::ConfinedFile(int folder_fd, std::string name, std::string display)
     : folder_fd_(folder_fd), name_(std::move(name)), display_(std::move(display)) {}
 
@@ -304,6 +311,11 @@ ConfinedFile DatabaseDirectory::resolve(const std::string& requested, bool creat
   }
   if (isTemporaryFileName(parts.back())) {
     throw InvalidInput("database name '" + requested + "' is reserved: saves name their temporary files so");
+  }
+  for (const std::string& part : parts) {
+    if (isTeamLedgerName(part)) {
+      throw InvalidInput("database name '" + requested + "' is reserved: a team station saves its ledger so");
+    }
   }
   if (create_folders && parts.back().size() > kMaxComponentBytes - kMaxTemporaryExtraBytes) {
     throw InvalidInput("database name '" + requested + "' ends in a name longer than " +

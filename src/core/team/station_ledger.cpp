@@ -122,6 +122,11 @@ uint64_t StationLedger::loopsReceivedFrom(const std::string& peer) const {
 
 void StationLedger::tookLoop(const std::string& peer) { ++loops_received_[peer]; }
 
+void StationLedger::skipLoopsReceivedTo(const std::string& peer, uint64_t count) {
+  uint64_t& received = loops_received_[peer];
+  received = std::max(received, count);
+}
+
 std::string StationLedger::toText() const {
   nlohmann::json j;
   j["format"] = "mild_lcd station ledger 1";

@@ -21,6 +21,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/ros/detection/database_store.hpp"
 #include "mild_lcd/ros/detection/keyframe_worker.hpp"
 #include "mild_lcd/ros/detection/periodic_task.hpp"
@@ -140,7 +141,7 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       // The ledger is saved with the maps, and read back only when they are.
       const std::string ledger =
           settings_.save_on_shutdown || settings_.load_on_start
-              ? robots_.front()->store->directory() + "/" + settings_.team_station + ".team_ledger.json"
+              ? robots_.front()->store->directory() + "/" + settings_.team_station + mild::kTeamLedgerSuffix
               : "";
       team_link_ = std::make_unique<TeamLink>(
           nh, settings_, shared_, shared_.team->names(), ledger,

@@ -10,6 +10,7 @@
 #include <boost/make_shared.hpp>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/ros/messages/message_conversions.hpp"
 
 namespace mild_lcd {
@@ -27,8 +28,13 @@ constexpr size_t kMaxNameLength = 64;
 constexpr std::chrono::seconds kResendAfter{2};
 // Loops resent to one peer per heartbeat period, at most (after a long outage many wait).
 constexpr size_t kMaxResendsPerTick = 50;
-// Loops kept for a peer until it acknowledges them; beyond, its summaries wait.
+// Loops kept for a peer until it acknowledges them; beyond, its summaries wait. A decider that
+// restarted has therefore lost at most this many of ours: a claim of more is refused.
 constexpr size_t kMaxUnacknowledged = 10000;
+// This station's summaries a peer may hold beyond what the ledger numbered (those of keyframes
+// stored after the last save, before a crash). A claim of more is refused: each number skipped is
+// a ledger entry, and a peer could otherwise make the ledger grow without end.
+constexpr uint64_t kMaxSummariesLostInACrash = 100000;
 
 template <class M>
 uint64_t bytesOf(const M& msg) {
@@ -153,7 +159,7 @@ void TeamLink::save() {
     text = ledger_.toText();
   }
   // Written beside, then renamed over: a crash leaves the previous ledger whole.
-  const std::string temporary = ledger_path_ + ".writing";
+  const std::string temporary = ledger_path_ + mild::kTeamLedgerTemporarySuffix;
   {
     std::ofstream out(temporary, std::ios::trunc);
     out << text;
@@ -181,7 +187,17 @@ void TeamLink::stored(const mild::DetectionResult& result) {
   uint64_t held = 0;
   {
     std::lock_guard<std::mutex> guard(mutex_);
-    for (const auto& [name, p] : peers_) held = std::max(held, p.holds_ours);
+    for (auto& [name, p] : peers_) {
+      if (p.holds_ours > ledger_.ownCount() + kMaxSummariesLostInACrash) {
+        ROS_WARN_STREAM_THROTTLE(10.0, "team link: peer '" << name << "' claims " << p.holds_ours
+                                                           << " of this station's summaries, which numbered "
+                                                           << ledger_.ownCount() << "; refused");
+        ++p.refused;
+        p.holds_ours = 0;
+        continue;
+      }
+      held = std::max(held, p.holds_ours);
+    }
   }
   if (held > ledger_.ownCount()) {
     ROS_WARN_STREAM("team link: peers hold " << held << " of this station's summaries, its ledger "
@@ -572,9 +588,16 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
     if (resumes > expected) {
       {
         std::lock_guard<std::mutex> guard(mutex_);
-        if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
+        Peer* p = peer(loop->decider);
+        // More lost than a decider keeps unacknowledged: not a restart, a false claim.
+        if (resumes - expected > kMaxUnacknowledged) {
+          if (p) ++p->refused;
+          return;
+        }
+        if (p) p->loops_lost += resumes - expected;
       }
-      for (; expected < resumes; ++expected) ledger_.tookLoop(loop->decider);
+      ledger_.skipLoopsReceivedTo(loop->decider, resumes);
+      expected = resumes;
     }
     if (loop->seq != expected) return;
     ledger_.tookLoop(loop->decider);
