@@ -193,8 +193,10 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
 
 // Claims no honest peer can make: that it holds 2^62 of the station's summaries (numbering past them
 // once meant a ledger entry each, under the detector's lock) and that it can no longer send its
-// first 2^62 loops for the station (skipping them once took a step each: the station stalled). Both
-// are refused and counted; the station's own robot keeps being answered, its numbering unchanged.
+// first 2^62 loops for the station (skipping them once took a step each: the station stalled); then
+// claims that are each plausible but together more than a crash can lose (10,000 numbers in a run);
+// and a summary whose names are a megabyte (held ahead of a gap, 144 of them per invented peer name
+// could hold gigabytes). Each is refused and counted; the station's own robot keeps being answered.
 // (Runs after the test above, with the station's 150 keyframes stored.)
 TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
@@ -202,20 +204,36 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
   ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
   ros::Publisher loop_pub = nh.advertise<mild_lcd::TeamLoop>("/mild_team/alpha/loops", 10);
+  ros::Publisher summary_pub = nh.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 10);
   ASSERT_TRUE(statuses.waitForPublisher(30.0));
   ASSERT_TRUE(waitForSubscriber(loop_pub, 30.0)) << "the station does not listen for mallory's loops";
+  ASSERT_TRUE(waitForSubscriber(summary_pub, 30.0));
+  const auto claim = [&](uint64_t holds, uint64_t loops_from) {
+    mild_lcd::TeamStatus s;
+    s.station = "mallory";
+    s.descriptor_bytes = 32;
+    s.peers = {"alpha"};
+    s.received = {holds};
+    s.loops_received = {0};
+    s.loops_from = {loops_from};
+    for (int i = 0; i < 4; ++i) {
+      status_pub.publish(s);
+      ros::WallDuration(0.25).sleep();
+    }
+  };
+  // Keyframes of the station's own robot (new ids, later stamps): every one answered.
+  size_t next = 0;
+  const auto store = [&](size_t count) {
+    std::vector<mild_lcd::Keyframe> more(sample.begin() + next, sample.begin() + next + count);
+    for (auto& k : more) {
+      k.id += 1000000;
+      k.header.stamp += ros::Duration(1000.0);
+    }
+    next += count;
+    EXPECT_EQ(answerTimes(more, 0, more.size(), 5.0).size(), more.size()) << "the station stalled";
+  };
   constexpr uint64_t kFar = uint64_t{1} << 62;
-  mild_lcd::TeamStatus claim;
-  claim.station = "mallory";
-  claim.descriptor_bytes = 32;
-  claim.peers = {"alpha"};
-  claim.received = {kFar};
-  claim.loops_received = {0};
-  claim.loops_from = {kFar};
-  for (int i = 0; i < 4; ++i) {
-    status_pub.publish(claim);
-    ros::WallDuration(0.25).sleep();
-  }
+  claim(kFar, kFar);
   mild_lcd::TeamLoop loop;
   loop.decider = "mallory";
   loop.seq = kFar;
@@ -223,26 +241,32 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   loop.loop.query_robot = "robot1";
   loop.loop.query_id = sample.front().id;
   loop_pub.publish(loop);
+  mild_lcd::PlaceSummary big;  // well formed but for a megabyte name
+  big.station = "mallory";
+  big.seq = 0;
+  big.robot = "m1";
+  big.descriptor_bytes = 32;
+  big.descriptors.assign(32 * 10, 0xA5);
+  big.known_stations = {std::string(1000000, 'x')};
+  big.known_counts = {0};
+  summary_pub.publish(big);
   ros::WallDuration(0.5).sleep();
-
-  // Twenty more keyframes of the station's own robot (new ids, later stamps): every one answered.
-  std::vector<mild_lcd::Keyframe> more(sample.begin(), sample.begin() + 20);
-  for (auto& k : more) {
-    k.id += 1000000;
-    k.header.stamp += ros::Duration(1000.0);
-  }
-  const std::vector<double> answered = answerTimes(more, 0, more.size(), 5.0);
-  EXPECT_EQ(answered.size(), more.size()) << "the station stalled";
+  store(10);  // 160 numbered
+  claim(160 + 5000, 0);
+  store(5);  // 5000 skipped (a crash's worth), 5165 numbered
+  claim(5165 + 6000, 0);
+  store(5);                        // 11,000 in all would be more than a crash can lose: refused, 5170 numbered
   ros::WallDuration(2.5).sleep();  // its next heartbeats
   mild_lcd::TeamStatus last;
   for (const auto& s : statuses.messages()) {
     if (s.station == "alpha") last = s;
   }
   ASSERT_EQ(last.station, "alpha");
-  EXPECT_EQ(last.summaries, 170u) << "the station numbered its keyframes past a peer's false claim";
+  EXPECT_EQ(last.summaries, 5170u) << "the station numbered its keyframes past a peer's false claims";
   for (size_t i = 0; i < last.peers.size(); ++i) {
     if (last.peers[i] != "mallory") continue;
     EXPECT_LT(last.loops_received[i], 1000u) << "a false claim of lost loops was taken";
+    EXPECT_EQ(last.received[i], 0u) << "the summary with a megabyte name was taken";
   }
 }
 

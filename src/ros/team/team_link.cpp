@@ -21,6 +21,8 @@ using Clock = std::chrono::steady_clock;
 // A peer's message larger than this is refused: a whole keyframe of 10,000 features of 64 bytes
 // with keypoints is well under 2 MB.
 constexpr size_t kMaxMessageBytes = 4u << 20;
+// Requests, replies and loops waiting for the link's thread, in all (it takes them every 100 ms).
+constexpr uint64_t kMaxInboxBytes = 64u << 20;
 constexpr size_t kMaxSummaryDescriptors = 10000;
 constexpr size_t kMaxNameLength = 64;
 // Asked again when unanswered this long (a message published before the peer's subscriber
@@ -32,9 +34,13 @@ constexpr size_t kMaxResendsPerTick = 50;
 // restarted has therefore lost at most this many of ours: a claim of more is refused.
 constexpr size_t kMaxUnacknowledged = 10000;
 // This station's summaries a peer may hold beyond what the ledger numbered (those of keyframes
-// stored after the last save, before a crash). A claim of more is refused: each number skipped is
-// a ledger entry, and a peer could otherwise make the ledger grow without end.
-constexpr uint64_t kMaxSummariesLostInACrash = 100000;
+// stored after the last save, before a crash: at most ~autosave_period of keyframes), in all, over
+// a run. A claim of more is refused: each number skipped is a ledger entry and leaves every honest
+// peer as many summaries behind, and a peer could otherwise make the ledger grow without end.
+constexpr uint64_t kMaxSummariesLostInACrash = 10000;
+// A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
+// most kMaxPeers + 1 of each list), counts and fixed fields.
+constexpr size_t kMaxSummaryOverheadBytes = 16384;
 
 template <class M>
 uint64_t bytesOf(const M& msg) {
@@ -188,7 +194,7 @@ void TeamLink::stored(const mild::DetectionResult& result) {
   {
     std::lock_guard<std::mutex> guard(mutex_);
     for (auto& [name, p] : peers_) {
-      if (p.holds_ours > ledger_.ownCount() + kMaxSummariesLostInACrash) {
+      if (p.holds_ours > ledger_.ownCount() + (kMaxSummariesLostInACrash - summaries_skipped_)) {
         ROS_WARN_STREAM_THROTTLE(10.0, "team link: peer '" << name << "' claims " << p.holds_ours
                                                            << " of this station's summaries, which numbered "
                                                            << ledger_.ownCount() << "; refused");
@@ -203,6 +209,7 @@ void TeamLink::stored(const mild::DetectionResult& result) {
     ROS_WARN_STREAM("team link: peers hold " << held << " of this station's summaries, its ledger "
                                              << ledger_.ownCount() << " (a crash after the last save): numbering from "
                                              << held);
+    summaries_skipped_ += held - ledger_.ownCount();
     ledger_.skipTo(held);
   }
   const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
@@ -277,9 +284,14 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
   ++p->summaries_in;
   p->summary_bytes_in += bytes;
   const size_t width = msg->descriptor_bytes;
+  const auto station_names = [](const std::vector<std::string>& names) {
+    return std::all_of(names.begin(), names.end(), [](const std::string& n) { return mild::validStationName(n); });
+  };
   const bool well_formed =
       width == static_cast<size_t>(descriptor_bytes_) && bytes <= kMaxMessageBytes &&
-      msg->descriptors.size() % width == 0 && msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
+      bytes <= 4 * static_cast<size_t>(settings_.team_summary_bytes) + kMaxSummaryOverheadBytes &&
+      station_names(msg->known_stations) && station_names(msg->unreachable) && msg->descriptors.size() % width == 0 &&
+      msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
       msg->descriptors.size() <= 4 * static_cast<size_t>(settings_.team_summary_bytes) &&
       msg->known_stations.size() == msg->known_counts.size() && msg->known_stations.size() <= kMaxPeers + 1 &&
       msg->unreachable.size() <= kMaxPeers + 1 && !msg->robot.empty() && msg->robot.size() <= kMaxNameLength;
@@ -325,7 +337,15 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
   p->compatible = msg->descriptor_bytes == static_cast<uint32_t>(descriptor_bytes_);
   for (size_t i = 0; i < msg->peers.size(); ++i) {
     if (msg->peers[i] != settings_.team_station) continue;
-    p->acknowledged = std::max(p->acknowledged, msg->loops_received[i]);
+    // It cannot have taken loops we never numbered: beyond the last we sent it, at most those of a
+    // run of ours that crashed with them unacknowledged (kMaxUnacknowledged). Judged again against
+    // the ledger before the next loop is numbered (judged()).
+    const uint64_t claim = msg->loops_received[i];
+    if (!p->unacknowledged.empty() && claim > p->unacknowledged.back().loop->seq + 1 + kMaxUnacknowledged) {
+      ++p->refused;
+      continue;
+    }
+    p->acknowledged = std::max(p->acknowledged, claim);
     p->holds_ours = msg->received[i];
     if (i < msg->loops_from.size()) p->loops_from = msg->loops_from[i];
   }
@@ -336,11 +356,15 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
 
 template <class Ptr>
 void TeamLink::queue(std::deque<Ptr>& inbox, const Ptr& msg) {
+  // Bounded in bytes as well as in count, on arrival: a thousand messages of a few megabytes each
+  // would otherwise wait for the thread.
+  const uint64_t bytes = bytesOf(*msg);
   std::lock_guard<std::mutex> guard(mutex_);
-  if (inbox.size() >= kMaxInbox) {
+  if (inbox.size() >= kMaxInbox || bytes > kMaxMessageBytes || inbox_bytes_ + bytes > kMaxInboxBytes) {
     ++refused_;
     return;
   }
+  inbox_bytes_ += bytes;
   inbox.push_back(msg);
   wake_.notify_one();
 }
@@ -366,6 +390,7 @@ void TeamLink::run() {
       requests.swap(requests_);
       replies.swap(replies_);
       loops.swap(loops_);
+      inbox_bytes_ = 0;
     }
     // One message that cannot be handled is counted; the others are handled still.
     const auto guarded = [this](const auto& handle) {
@@ -548,7 +573,12 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     if (Peer* p = peer(pending.peer)) {
       // The peer took more of our loops than our ledger numbered (we crashed after our last save):
       // numbering goes on above them, or it would take our next loops for ones it published.
-      if (p->acknowledged > ledger_.loopsSentTo(pending.peer)) ledger_.skipLoopsTo(pending.peer, p->acknowledged);
+      // More than a crashed run can have left unacknowledged is a false claim: refused, and
+      // numbering goes on from the ledger's.
+      if (!ledger_.takeAcknowledged(pending.peer, p->acknowledged, kMaxUnacknowledged)) {
+        ++p->refused;
+        p->acknowledged = ledger_.loopsSentTo(pending.peer);
+      }
       loop->seq = ledger_.nextLoopFor(pending.peer);
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;

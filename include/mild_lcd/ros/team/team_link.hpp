@@ -171,8 +171,12 @@ class TeamLink {
   std::map<uint64_t, Pending> pending_;              // by request id
   std::map<std::string, uint32_t> remote_sessions_;  // per remote robot: its last summary's session (thread only)
   uint64_t next_request_ = 1;
-  uint64_t refused_ = 0;  // from no peer (malformed names, too many peers, full inboxes)
+  uint64_t refused_ = 0;      // from no peer (malformed names, too many peers, full inboxes)
+  uint64_t inbox_bytes_ = 0;  // of requests_, replies_ and loops_
   uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
+  // This station's summary numbers skipped this run because peers held them (a crash after the
+  // last save); bounded in all by kMaxSummariesLostInACrash. Worker thread only.
+  uint64_t summaries_skipped_ = 0;
 
   ros::Publisher summaries_pub_, status_pub_;
   ros::Subscriber summaries_sub_, backfill_sub_, status_sub_, requests_sub_, features_sub_, loops_sub_;
