@@ -28,7 +28,8 @@ DatabaseStore::DatabaseStore(const NodeSettings& settings, size_t robot, const s
       database_path_(robotPath(settings.database_path, robot_name)),
       load_on_start_(settings.load_on_start),
       save_on_shutdown_(settings.save_on_shutdown),
-      max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20) {
+      max_bytes_(static_cast<unsigned long long>(settings.max_database_mb) << 20),
+      start_up_pending_(settings.load_on_start) {
   if (!database_path_.empty()) {
     try {
       // A robot's folder (~robots) is made when its map will be saved: a first start finds it.
@@ -49,19 +50,30 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
   if (!load_on_start_) return "";
   try {
     const mild::ConfinedFile file = resolve("", false);
-    if (!file.exists()) return "database " + file.display() + " does not exist yet: starting with an empty map";
+    if (!file.exists()) {
+      start_up_pending_ = false;
+      return "database " + file.display() + " does not exist yet: starting with an empty map";
+    }
     mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, false, max_bytes_);
     const std::string message = prepared.report.message;
     const auto lock = shared.lock();
     mild::commitLoad(detector(shared).map(), std::move(prepared));
     shared.mapReplaced(robot_, false);  // the file holds it: no change to save
+    start_up_pending_ = false;
     return message;
   } catch (const std::exception& e) {
     database_protected_ = true;
     const auto lock = shared.lock();
     failure(shared) = std::string("the map ~database_path could not be loaded at start-up (") + e.what() +
                       "); the file is left untouched and nothing will be saved over it";
+    start_up_pending_ = false;
     throw;
+  }
+}
+
+void DatabaseStore::refuseWhileStartingUp() const {
+  if (start_up_pending_) {
+    throw mild::InvalidInput("the map ~database_path is still being loaded at start-up: ask again when it is");
   }
 }
 
@@ -76,6 +88,7 @@ std::string DatabaseStore::save(SharedDetector& shared, const std::string& reque
   const mild::ConfinedFile file = resolve(requested, true);
   const bool to_database_path = !database_display_.empty() && file.display() == database_display_;
   const auto lock = shared.lock();
+  refuseWhileStartingUp();  // the map is still empty: saved, it would replace the one being loaded
   if (!failure(shared).empty()) throw mild::InvalidInput(failure(shared));
   // A request that names the file is the user's decision; an empty one merely defaults to it.
   if (to_database_path && database_protected_ && requested.empty()) throw mild::InvalidInput(protectionNotice());
@@ -88,7 +101,7 @@ std::string DatabaseStore::save(SharedDetector& shared, const std::string& reque
 }
 
 std::string DatabaseStore::autosave(SharedDetector& shared) {
-  if (!save_on_shutdown_ || database_protected_) return "";
+  if (!save_on_shutdown_ || database_protected_ || start_up_pending_) return "";
   {
     const auto lock = shared.lock();
     if (saved_changes_ == shared.changes) return "";
@@ -97,6 +110,7 @@ std::string DatabaseStore::autosave(SharedDetector& shared) {
 }
 
 mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
+  refuseWhileStartingUp();  // the start-up load would replace it as soon as it is in
   const mild::ConfinedFile file = resolve(requested, false);
   // LoopDetector's parameters never change after construction: preparing needs no lock.
   mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, continue_session, max_bytes_);
@@ -116,6 +130,7 @@ mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& 
 }
 
 mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string& requested) {
+  refuseWhileStartingUp();
   const mild::ConfinedFile file = resolve(requested, false);
   mild::MapState state = mild::readMapFile(file, max_bytes_);
   const auto lock = shared.lock();
@@ -131,6 +146,7 @@ mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string&
 std::string DatabaseStore::saveOnShutdown(SharedDetector& shared) {
   if (!save_on_shutdown_) return "";
   if (database_protected_) return "not saving on shutdown: " + protectionNotice();
+  if (start_up_pending_) return "not saving on shutdown: the map ~database_path was never loaded (stopped before)";
   return save(shared, "");
 }
 

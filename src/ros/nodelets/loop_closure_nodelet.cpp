@@ -185,7 +185,11 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       robots_[r]->inputs = std::make_unique<RobotInputs>(robots_[r]->nh, pnh, r, settings_, getName(),
                                                          [this](KeyframeInputPtr item) { enqueue(std::move(item)); });
     }
-    const mild::DetectorParams& params = shared_.team->params();
+    // A copy, under the lock: the worker and the tuning server run already (a retune replaces them).
+    const mild::DetectorParams params = [this] {
+      const auto lock = shared_.lock();
+      return shared_.team->params();
+    }();
     NODELET_INFO(
         "mild_lcd ready: %s%s%s%s, %s features (%d-byte descriptors%s), exclusion %d keyframes, "
         "verification %s, maps in %s",

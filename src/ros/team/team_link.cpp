@@ -88,6 +88,10 @@ TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetec
 TeamLink::~TeamLink() { stop(); }
 
 void TeamLink::start() {
+  // start() runs on the worker (after the start-up load) and stop() on the nodelet's shutdown: one
+  // at a time, and nothing started once stopped (the subscribers and the thread are theirs).
+  std::lock_guard<std::mutex> lifecycle(lifecycle_);
+  if (stopped_) return;
   if (!ledger_path_.empty() && settings_.load_on_start && std::filesystem::exists(ledger_path_)) {
     std::ifstream in(ledger_path_);
     std::stringstream text;
@@ -121,6 +125,8 @@ void TeamLink::start() {
 }
 
 void TeamLink::stop() {
+  std::lock_guard<std::mutex> lifecycle(lifecycle_);
+  stopped_ = true;
   // Keyframes of peers waiting for their features were taken already: their loops would be lost
   // with a restart. Their answers are waited for a moment (a pull takes milliseconds on a live link).
   // So are the acknowledgements of loops sent to connected peers (a restart forgets them).

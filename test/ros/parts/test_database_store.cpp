@@ -123,6 +123,27 @@ TEST_F(Store, LoadingTheRefusedMapItselfByHandLiftsItsProtection) {
   EXPECT_NE(store.autosave(running).find("saved 4 keyframes"), std::string::npos);
 }
 
+// The services are up before the worker loads the map (several robots load one after another):
+// until then a save without a path once replaced the saved map with the empty one, and a load by
+// hand was replaced by the start-up load. Both are refused, and nothing is saved, until it is in.
+TEST_F(Store, NothingIsSavedOrLoadedBeforeTheStartUpLoad) {
+  mild::saveMap(detector(4)->map(), (dir_ / "map.db").string());
+  mild::saveMap(detector(2)->map(), (dir_ / "other.db").string());
+  DatabaseStore store(settings("database_path: map.db\nload_on_start: true\nsave_on_shutdown: true\n"));
+  SharedDetector running;
+  running.setTeam(std::make_unique<mild::RobotTeam>(detector(0)));
+  ++running.changes;
+  EXPECT_NE(errorOf([&] { store.save(running, ""); }).find("still being loaded"), std::string::npos);
+  EXPECT_NE(errorOf([&] { store.load(running, "other.db", false); }).find("still being loaded"), std::string::npos);
+  EXPECT_NE(errorOf([&] { store.merge(running, "other.db"); }).find("still being loaded"), std::string::npos);
+  EXPECT_EQ(store.autosave(running), "");
+  EXPECT_NE(store.saveOnShutdown(running).find("never loaded"), std::string::npos);
+  EXPECT_EQ(mild::readMapFile((dir_ / "map.db").string()).records.size(), 4u) << "the saved map is whole";
+  store.loadOnStart(running);
+  EXPECT_EQ(running.robot(0).map().size(), 4u);
+  EXPECT_NE(store.save(running, "").find("saved 4 keyframes"), std::string::npos);
+}
+
 TEST_F(Store, AMissingMapStartsEmptyAndIsSavedOnShutdown) {
   DatabaseStore store(settings("database_path: new.db\nload_on_start: true\nsave_on_shutdown: true\n"));
   SharedDetector running;

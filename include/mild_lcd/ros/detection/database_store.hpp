@@ -33,7 +33,10 @@ class DatabaseStore {
 
   // The services. `requested` empty means ~database_path. Names resolve inside ~database_dir or are
   // refused; loading reads and rebuilds the index without the detector lock, then swaps it in.
-  // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure. While
+  // Throw mild::Error with a message fit for the reply; the detector is unchanged on failure. Until
+  // loadOnStart has run (with ~load_on_start), all three are refused and autosave and
+  // saveOnShutdown save nothing: the map is still empty, and the services are up before the worker
+  // loads it (several robots load one after another). While
   // ~database_path is protected, a save to it must name it (`requested` not empty): that is the
   // user's explicit decision to replace it, and lifts the protection.
   std::string save(SharedDetector& shared, const std::string& requested);
@@ -69,6 +72,8 @@ class DatabaseStore {
   bool save_on_shutdown_;
   unsigned long long max_bytes_;
   std::atomic<bool> database_protected_{false};
+  std::atomic<bool> start_up_pending_{false};  // ~load_on_start and loadOnStart has not run yet
+  void refuseWhileStartingUp() const;
   std::string database_display_;  // ~database_path as resolved ("" when not set)
   // SharedDetector::changes when ~database_path last held the map (start: nothing learnt yet, or
   // what the file holds). Under the detector lock.

@@ -163,6 +163,8 @@ class TeamLink {
   std::mutex mutex_;  // everything below; never held while taking the detector lock
   std::condition_variable wake_;
   bool stopping_ = false;
+  std::mutex lifecycle_;   // start() and stop(), one at a time
+  bool stopped_ = false;   // stop() ran: start() does nothing (under lifecycle_)
   bool draining_ = false;  // stop(): no more peer keyframes taken, the open pulls answered
   std::map<std::string, Peer> peers_;
   std::deque<mild_lcd::TeamRequest::ConstPtr> requests_;
