@@ -254,6 +254,39 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
   return msg;
 }
 
+// A peer's inbox topic before the link's thread has advertised it (shortly after its first sight):
+// what would go there is not sent, as if lost on the way; the protocol sends it again (resends,
+// re-asked gaps and pulls).
+namespace {
+template <class M>
+void publishTo(const ros::Publisher& to, const M& msg) {
+  if (to) to.publish(msg);
+}
+}  // namespace
+
+void TeamLink::advertiseNewPeers() {
+  std::vector<std::string> names;
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    for (const auto& [name, p] : peers_) {
+      if (!p.advertised) names.push_back(name);
+    }
+  }
+  for (const std::string& name : names) {  // no lock held: each advertise waits for the master
+    ros::Publisher requests = nh_.advertise<mild_lcd::TeamRequest>(topic(name, "requests"), 1000);
+    ros::Publisher summaries = nh_.advertise<mild_lcd::PlaceSummary>(topic(name, "summaries"), 1000);
+    ros::Publisher features = nh_.advertise<mild_lcd::TeamFeatures>(topic(name, "features"), 100);
+    ros::Publisher loops = nh_.advertise<mild_lcd::TeamLoop>(topic(name, "loops"), 1000);
+    std::lock_guard<std::mutex> guard(mutex_);
+    Peer& p = peers_.at(name);  // peers are kept for the run
+    p.to_requests = requests;
+    p.to_summaries = summaries;
+    p.to_features = features;
+    p.to_loops = loops;
+    p.advertised = true;
+  }
+}
+
 // --- what arrives (callbacks: they only queue) ---
 
 TeamLink::Peer* TeamLink::peer(const std::string& name) {
@@ -261,11 +294,9 @@ TeamLink::Peer* TeamLink::peer(const std::string& name) {
   if (it != peers_.end()) return &it->second;
   if (name == settings_.team_station || !mild::validStationName(name) || peers_.size() >= kMaxPeers) return nullptr;
   Peer& p = peers_[name];
-  // Advertised on first sight, so that the connections exist by the time they are needed.
-  p.to_requests = nh_.advertise<mild_lcd::TeamRequest>(topic(name, "requests"), 1000);
-  p.to_summaries = nh_.advertise<mild_lcd::PlaceSummary>(topic(name, "summaries"), 1000);
-  p.to_features = nh_.advertise<mild_lcd::TeamFeatures>(topic(name, "features"), 100);
-  p.to_loops = nh_.advertise<mild_lcd::TeamLoop>(topic(name, "loops"), 1000);
+  // Its inbox topics are advertised by the link's thread (advertiseNewPeers), within 100 ms: not
+  // here, under mutex_, which the worker may wait for while it holds the detector lock, and
+  // advertising waits for the ROS master.
   p.tokens = 2.0 * settings_.team_max_requests_per_second;
   p.refilled = Clock::now();
   return &p;
@@ -398,6 +429,11 @@ void TeamLink::run() {
       loops.swap(loops_);
       inbox_bytes_ = 0;
     }
+    try {
+      advertiseNewPeers();
+    } catch (const std::exception& e) {
+      ROS_WARN_STREAM_THROTTLE(5.0, "team link: " << e.what());
+    }
     // One message that cannot be handled is counted; the others are handled still.
     const auto guarded = [this](const auto& handle) {
       try {
@@ -511,7 +547,7 @@ void TeamLink::sendPull(uint64_t request_id, Pending& pending) {
   request.kind = mild_lcd::TeamRequest::FEATURES;
   request.robot = pending.summary->robot;
   request.id = pending.summary->id;
-  p->to_requests.publish(request);
+  publishTo(p->to_requests, request);
   p->bytes_out += bytesOf(request);
   pending.asked = Clock::now();
   ++pending.attempts;
@@ -589,7 +625,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
       p->unacknowledged.push_back({loop, Clock::now()});
-      p->to_loops.publish(loop);
+      publishTo(p->to_loops, loop);
       p->bytes_out += bytesOf(*loop);
     }
   }
@@ -665,7 +701,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
         busy.request_id = request->request_id;
         busy.status = mild_lcd::TeamFeatures::BUSY;
         busy.reason = "more than ~team/max_requests_per_second requests";
-        p->to_features.publish(busy);
+        publishTo(p->to_features, busy);
       }
       return;
     }
@@ -682,7 +718,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
     std::lock_guard<std::mutex> guard(mutex_);
     Peer* p = peer(request->from);
     for (const auto& s : batch) {
-      p->to_summaries.publish(s);
+      publishTo(p->to_summaries, s);
       p->bytes_out += bytesOf(*s);
     }
     return;
@@ -712,7 +748,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
   std::lock_guard<std::mutex> guard(mutex_);
   Peer* p = peer(request->from);
   if (reply->status != mild_lcd::TeamFeatures::OK) ++p->refused;
-  p->to_features.publish(reply);
+  publishTo(p->to_features, reply);
   p->bytes_out += bytesOf(*reply);
 }
 
@@ -747,7 +783,7 @@ void TeamLink::tick() {
       request.kind = mild_lcd::TeamRequest::SUMMARIES;
       request.first = p.taken;
       request.count = static_cast<uint32_t>(settings_.team_backfill_batch);
-      p.to_requests.publish(request);
+      publishTo(p.to_requests, request);
       p.bytes_out += bytesOf(request);
       p.backfill_asked = now;
     }
@@ -756,7 +792,7 @@ void TeamLink::tick() {
     for (auto& sent : p.unacknowledged) {
       if (resent == kMaxResendsPerTick) break;
       if (now - sent.at < kResendAfter) continue;
-      p.to_loops.publish(sent.loop);
+      publishTo(p.to_loops, sent.loop);
       p.bytes_out += bytesOf(*sent.loop);
       sent.at = now;
       ++resent;

@@ -109,6 +109,7 @@ class TeamLink {
     uint64_t bytes_out = 0, loops_decided = 0, loops_found_late = 0, refused = 0, duplicates = 0, reconnects = 0;
     uint64_t loops_lost = 0;  // its loops for us it could no longer send (its restart, or crash)
     ros::Publisher to_requests, to_summaries, to_features, to_loops;  // to its inbox
+    bool advertised = false;                                          // the four above exist (advertiseNewPeers)
   };
   struct Pending {  // a peer's keyframe waiting for its features
     std::string peer;
@@ -121,7 +122,8 @@ class TeamLink {
   };
 
   void run();
-  void tick();  // heartbeat, gap requests, resends: once a second
+  void tick();               // heartbeat, gap requests, resends: once a second
+  void advertiseNewPeers();  // the inbox topics of peers seen since (on the thread: never under mutex_)
   bool takeNextSummary();
   void take(const std::string& peer, const mild_lcd::PlaceSummary::ConstPtr& summary, bool late);
   void judged(const Pending& pending, const mild::Features* features);
