@@ -194,7 +194,7 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
 // Claims no honest peer can make: that it holds 2^62 of the station's summaries (numbering past them
 // once meant a ledger entry each, under the detector's lock) and that it can no longer send its
 // first 2^62 loops for the station (skipping them once took a step each: the station stalled); then
-// claims that are each plausible but together more than a crash can lose (10,000 numbers in a run);
+// claims that are each plausible but together more than a run can skip (a million numbers);
 // and a summary whose names are a megabyte (held ahead of a gap, 144 of them per invented peer name
 // could hold gigabytes). Each is refused and counted; the station's own robot keeps being answered.
 // (Runs after the test above, with the station's 150 keyframes stored.)
@@ -253,9 +253,9 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   ros::WallDuration(0.5).sleep();
   store(10);  // 160 numbered
   claim(160 + 5000, 0);
-  store(5);  // 5000 skipped (a crash's worth), 5165 numbered
-  claim(5165 + 6000, 0);
-  store(5);                        // 11,000 in all would be more than a crash can lose: refused, 5170 numbered
+  store(5);  // 5000 skipped (a restart's worth), 5165 numbered
+  claim(5165 + 1000000, 0);
+  store(5);                        // 1,005,000 in all would be more than a run can skip: refused, 5170 numbered
   ros::WallDuration(2.5).sleep();  // its next heartbeats
   mild_lcd::TeamStatus last;
   for (const auto& s : statuses.messages()) {

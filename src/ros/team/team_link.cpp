@@ -30,14 +30,19 @@ constexpr size_t kMaxNameLength = 64;
 constexpr std::chrono::seconds kResendAfter{2};
 // Loops resent to one peer per heartbeat period, at most (after a long outage many wait).
 constexpr size_t kMaxResendsPerTick = 50;
-// Loops kept for a peer until it acknowledges them; beyond, its summaries wait. A decider that
-// restarted has therefore lost at most this many of ours: a claim of more is refused.
+// Loops kept for a peer until it acknowledges them; beyond, its summaries wait.
 constexpr size_t kMaxUnacknowledged = 10000;
-// This station's summaries a peer may hold beyond what the ledger numbered (those of keyframes
-// stored after the last save, before a crash: at most ~autosave_period of keyframes), in all, over
-// a run. A claim of more is refused: each number skipped is a ledger entry and leaves every honest
-// peer as many summaries behind, and a peer could otherwise make the ledger grow without end.
-constexpr uint64_t kMaxSummariesLostInACrash = 10000;
+// A count of loops no run reaches (one a microsecond for 146,000 years): a peer claiming one (as
+// taken, or as the lowest it can still send) is refused. Below it, a claim moves only the claiming
+// peer's numbering, at once (StationLedger::skipLoopsTo, skipLoopsReceivedTo): a station restarted
+// without its saved ledger (the default: ~save_on_shutdown off) starts from 0 and learns from its
+// peers' heartbeats where numbering stands, however far that is.
+constexpr uint64_t kAbsurdCount = uint64_t{1} << 62;
+// This station's summary numbers skipped because peers hold them (a restart without the saved
+// ledger, or a crash after the last save), in all over a run: each is a ledger entry (about 64
+// bytes) made under the detector's lock. A run of up to a million keyframes restarts whole; a claim
+// beyond is refused (a false claim of 2^62 grew the ledger until memory ran out).
+constexpr uint64_t kMaxSummariesSkipped = 1000000;
 // A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
 // most kMaxPeers + 1 of each list), counts and fixed fields.
 constexpr size_t kMaxSummaryOverheadBytes = 16384;
@@ -200,7 +205,7 @@ void TeamLink::stored(const mild::DetectionResult& result) {
   {
     std::lock_guard<std::mutex> guard(mutex_);
     for (auto& [name, p] : peers_) {
-      if (p.holds_ours > ledger_.ownCount() + (kMaxSummariesLostInACrash - summaries_skipped_)) {
+      if (p.holds_ours > ledger_.ownCount() + (kMaxSummariesSkipped - summaries_skipped_)) {
         ROS_WARN_STREAM_THROTTLE(10.0, "team link: peer '" << name << "' claims " << p.holds_ours
                                                            << " of this station's summaries, which numbered "
                                                            << ledger_.ownCount() << "; refused");
@@ -374,11 +379,8 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
   p->compatible = msg->descriptor_bytes == static_cast<uint32_t>(descriptor_bytes_);
   for (size_t i = 0; i < msg->peers.size(); ++i) {
     if (msg->peers[i] != settings_.team_station) continue;
-    // It cannot have taken loops we never numbered: beyond the last we sent it, at most those of a
-    // run of ours that crashed with them unacknowledged (kMaxUnacknowledged). Judged again against
-    // the ledger before the next loop is numbered (judged()).
     const uint64_t claim = msg->loops_received[i];
-    if (!p->unacknowledged.empty() && claim > p->unacknowledged.back().loop->seq + 1 + kMaxUnacknowledged) {
+    if (claim >= kAbsurdCount || (i < msg->loops_from.size() && msg->loops_from[i] >= kAbsurdCount)) {
       ++p->refused;
       continue;
     }
@@ -394,10 +396,11 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
 template <class Ptr>
 void TeamLink::queue(std::deque<Ptr>& inbox, const Ptr& msg) {
   // Bounded in bytes as well as in count, on arrival: a thousand messages of a few megabytes each
-  // would otherwise wait for the thread.
+  // would otherwise wait for the thread. An empty inbox takes any one message (a whole keyframe's
+  // features may be larger than the bound; each handler judges its own message's size).
   const uint64_t bytes = bytesOf(*msg);
   std::lock_guard<std::mutex> guard(mutex_);
-  if (inbox.size() >= kMaxInbox || bytes > kMaxMessageBytes || inbox_bytes_ + bytes > kMaxInboxBytes) {
+  if (inbox.size() >= kMaxInbox || (inbox_bytes_ > 0 && inbox_bytes_ + bytes > kMaxInboxBytes)) {
     ++refused_;
     return;
   }
@@ -613,11 +616,10 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     loop->loop = *msg;
     std::lock_guard<std::mutex> guard(mutex_);
     if (Peer* p = peer(pending.peer)) {
-      // The peer took more of our loops than our ledger numbered (we crashed after our last save):
-      // numbering goes on above them, or it would take our next loops for ones it published.
-      // More than a crashed run can have left unacknowledged is a false claim: refused, and
-      // numbering goes on from the ledger's.
-      if (!ledger_.takeAcknowledged(pending.peer, p->acknowledged, kMaxUnacknowledged)) {
+      // The peer took more of our loops than our ledger numbered (we restarted without the ledger,
+      // or crashed after our last save): numbering goes on above them, or it would take our next
+      // loops for ones it published. (A count no run reaches is refused in onStatus already.)
+      if (!ledger_.takeAcknowledged(pending.peer, p->acknowledged, kAbsurdCount)) {
         ++p->refused;
         p->acknowledged = ledger_.loopsSentTo(pending.peer);
       }
@@ -661,8 +663,8 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
       {
         std::lock_guard<std::mutex> guard(mutex_);
         Peer* p = peer(loop->decider);
-        // More lost than a decider keeps unacknowledged: not a restart, a false claim.
-        if (resumes - expected > kMaxUnacknowledged) {
+        // A count no run reaches: not a restart, a false claim.
+        if (resumes >= kAbsurdCount) {
           if (p) ++p->refused;
           return;
         }
