@@ -212,24 +212,6 @@ TEST(StationLedger, LoopsADeciderCanNoLongerSendAreSkippedAtOnce) {
   EXPECT_EQ(ledger.loopsReceivedFrom("charlie"), 0u);
 }
 
-// A peer's acknowledgement of loops beyond what was numbered: those of a crashed run (at most what
-// a decider keeps unacknowledged) are skipped; a claim beyond that is refused and changes nothing
-// (taken, 2^62 pushed every later loop's number out of the peer's reach, and UINT64_MAX wrapped).
-TEST(StationLedger, AnAcknowledgementOfLoopsNeverSentIsRefused) {
-  StationLedger ledger("alpha", 1);
-  EXPECT_EQ(ledger.nextLoopFor("bravo"), 0u);
-  EXPECT_TRUE(ledger.takeAcknowledged("bravo", 1, 10000));
-  EXPECT_EQ(ledger.loopsSentTo("bravo"), 1u);
-  EXPECT_TRUE(ledger.takeAcknowledged("bravo", 9001, 10000)) << "a crashed run's loops";
-  EXPECT_EQ(ledger.nextLoopFor("bravo"), 9001u);
-  for (uint64_t claim : {uint64_t{9002} + 10001, uint64_t{1} << 62, ~uint64_t{0}}) {
-    EXPECT_FALSE(ledger.takeAcknowledged("bravo", claim, 10000)) << claim;
-  }
-  EXPECT_EQ(ledger.nextLoopFor("bravo"), 9002u) << "numbering goes on from the ledger's";
-  EXPECT_TRUE(ledger.takeAcknowledged("bravo", 5, 10000)) << "behind: nothing to skip";
-  EXPECT_EQ(ledger.loopsSentTo("bravo"), 9003u);
-}
-
 TEST(RobotTeamRemote, AMapChangedStartsTheRemoteRobotsFiltersOver) {
   const DetectorParams params;
   const FeatureFrontEnd front_end(params.features);

@@ -80,11 +80,6 @@ class StationLedger {
   uint64_t loopsSentTo(const std::string& peer) const;
   // Numbers below `count` taken (a peer holds loops of a crashed run under them).
   void skipLoopsTo(const std::string& peer, uint64_t count);
-  // A peer's acknowledgement: it holds our loops [0, acknowledged). Beyond what the ledger numbered
-  // it can be loops of a run that crashed with them unacknowledged, at most `max_unacknowledged`:
-  // numbering skips them. Returns false, changing nothing, for a claim beyond that (false: the peer
-  // cannot hold loops that were never sent; taken, it would push numbering out of the peer's reach).
-  bool takeAcknowledged(const std::string& peer, uint64_t acknowledged, uint64_t max_unacknowledged);
   // Loops a peer decided for this station's keyframes: taken contiguously, as summaries.
   uint64_t loopsReceivedFrom(const std::string& peer) const;
   void tookLoop(const std::string& peer);

@@ -110,13 +110,6 @@ void StationLedger::skipLoopsTo(const std::string& peer, uint64_t count) {
   sent = std::max(sent, count);
 }
 
-bool StationLedger::takeAcknowledged(const std::string& peer, uint64_t acknowledged, uint64_t max_unacknowledged) {
-  const uint64_t sent = loopsSentTo(peer);
-  if (acknowledged > sent && acknowledged - sent > max_unacknowledged) return false;
-  if (acknowledged > sent) skipLoopsTo(peer, acknowledged);
-  return true;
-}
-
 uint64_t StationLedger::loopsSentTo(const std::string& peer) const {
   const auto it = loops_sent_.find(peer);
   return it == loops_sent_.end() ? 0 : it->second;

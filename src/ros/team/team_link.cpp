@@ -618,11 +618,8 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     if (Peer* p = peer(pending.peer)) {
       // The peer took more of our loops than our ledger numbered (we restarted without the ledger,
       // or crashed after our last save): numbering goes on above them, or it would take our next
-      // loops for ones it published. (A count no run reaches is refused in onStatus already.)
-      if (!ledger_.takeAcknowledged(pending.peer, p->acknowledged, kAbsurdCount)) {
-        ++p->refused;
-        p->acknowledged = ledger_.loopsSentTo(pending.peer);
-      }
+      // loops for ones it published. (A count no run reaches is refused in onStatus.)
+      if (p->acknowledged > ledger_.loopsSentTo(pending.peer)) ledger_.skipLoopsTo(pending.peer, p->acknowledged);
       loop->seq = ledger_.nextLoopFor(pending.peer);
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
@@ -662,13 +659,8 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
     if (resumes > expected) {
       {
         std::lock_guard<std::mutex> guard(mutex_);
-        Peer* p = peer(loop->decider);
-        // A count no run reaches: not a restart, a false claim.
-        if (resumes >= kAbsurdCount) {
-          if (p) ++p->refused;
-          return;
-        }
-        if (p) p->loops_lost += resumes - expected;
+        // (loops_from is below kAbsurdCount: onStatus refuses more.)
+        if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
       }
       ledger_.skipLoopsReceivedTo(loop->decider, resumes);
       expected = resumes;

@@ -178,8 +178,9 @@ class TeamLink {
   uint64_t refused_ = 0;      // from no peer (malformed names, too many peers, full inboxes)
   uint64_t inbox_bytes_ = 0;  // of requests_, replies_ and loops_
   uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
-  // This station's summary numbers skipped this run because peers held them (a crash after the
-  // last save); bounded in all by kMaxSummariesSkipped. Worker thread only.
+  // This station's summary numbers skipped this run because peers held them (a restart without the
+  // saved ledger, or a crash after the last save); bounded in all by kMaxSummariesSkipped. Under the
+  // detector lock.
   uint64_t summaries_skipped_ = 0;
 
   ros::Publisher summaries_pub_, status_pub_;
