@@ -62,6 +62,8 @@ def score_json(bench, seq, csv):
 
 def kind_name(name):
     base = re.sub(r"_k\d+$", "", name)
+    if base.startswith("rtab_"):
+        return "real corridors"
     if base.startswith("gp_") or base.startswith("real_"):
         return "real night" if "night" in base else "real day"
     return re.sub(r"_s\d+$", "", base)
@@ -80,7 +82,7 @@ def main():
     ap.add_argument("runs", nargs="+")
     a = ap.parse_args()
     held_seeds = {x for x in a.held_out_seeds.split(",") if x}
-    decision = a.decision if a.decision is not None else default_decision()
+    decision = a.decision if a.decision is not None else fit_scoring.default_decision()
     fit_scoring.DECISION = decision
     runs = []
     for spec in a.runs:
@@ -171,14 +173,6 @@ def published_table(runs, bench, calibration, score, decision):
               f"{m['recall_at_decision']:.3f} |")
         rows.append({"ece": c["ece"], **s, **m})
     return rows
-
-
-def default_decision():
-    for line in open(os.path.join(HERE, "..", "config", "default.yaml")):
-        m = re.match(r"\s+decision_probability:\s*([\d.]+)", line)
-        if m:
-            return float(m.group(1))
-    sys.exit("config/default.yaml has no scoring/decision_probability: pass --decision")
 
 
 def plot(folder, runs, score):

@@ -21,7 +21,7 @@ scaled below the decision, candidate_scorer.hpp: belowDecision): the metrics and
 query's best candidate here apply it too.
 
 Usage:
-  fit_scoring.py RUN [RUN ...] [--l2 0.001] [--wrong-weight 1] [--decision 0.91] [--cv] [--cv-steps] [--json OUT.json]
+  fit_scoring.py RUN [RUN ...] [--l2 0.001] [--wrong-weight 1] [--decision P] [--cv] [--cv-steps] [--json OUT.json]
 RUN is NAME=SEQUENCE_DIR:DETAILS.csv (SEQUENCE_DIR holds gt_loops.txt). With --cv each kind is left
 out in turn, the scorer fitted on the others and scored on the runs of the kind left out
 (recall@100%P, AP, and precision/recall at the decision, --decision); with --cv-steps each keyframe step
@@ -29,6 +29,7 @@ likewise. Prints the fit on all runs as a YAML section.
 """
 import json
 import math
+import os
 import re
 import sys
 
@@ -42,13 +43,25 @@ def step_of(name):
 
 def kind_of(name):
     name = re.sub(r"_k\d+$", "", name)
-    if name.startswith("gp_") or name.startswith("real_"):
+    if name.startswith(("gp_", "real_", "rtab_")):
         return "real"
     return re.sub(r"_s\d+$", "", name)
 
 
+KIND_WEIGHTS = {"real": 2.0}  # --kind-weight KIND=W: a kind's weight in the fit, 1 unless given here
 WRONG_WEIGHT = 1.0  # --wrong-weight: a wrong candidate counts this many times a right one in the fit
-DECISION = 0.91  # --decision: scoring/decision_probability, where the verification gate caps the unverified
+def default_decision():
+    """scoring/decision_probability of config/default.yaml (generated from the C++ declaration): the
+    one place the decision is written down."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    for line in open(os.path.join(here, "..", "config", "default.yaml")):
+        m = re.match(r"\s+decision_probability:\s*([\d.]+)", line)
+        if m:
+            return float(m.group(1))
+    sys.exit("config/default.yaml has no scoring/decision_probability: pass --decision")
+
+
+DECISION = default_decision()  # --decision: where the verification gate caps the unverified
 L2 = 0.001
 
 
@@ -114,6 +127,7 @@ def row_weights(runs, rows_of):
         kind = (r.get("descriptor", ""), r["kind"])
         labelled = [row for row in rows_of(r) if row[3] >= 0]
         share = len(kinds_of_descriptor[kind[0]]) * len(steps_of_kind[kind]) * runs_of_step[(kind, r["step"])]
+        share /= KIND_WEIGHTS.get(r["kind"], 1.0)
         for _, _, f, lab, _ in labelled:
             x.append(f)
             y.append(lab)
@@ -216,6 +230,11 @@ def main():
         WRONG_WEIGHT = float(args[args.index("--wrong-weight") + 1])
         args.remove(args[args.index("--wrong-weight") + 1])
         args.remove("--wrong-weight")
+    while "--kind-weight" in args:
+        at = args.index("--kind-weight")
+        kind, weight = args[at + 1].split("=")
+        KIND_WEIGHTS[kind] = float(weight)
+        del args[at:at + 2]
     global DECISION
     if "--decision" in args:
         DECISION = float(args[args.index("--decision") + 1])

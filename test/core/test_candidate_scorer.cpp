@@ -32,7 +32,7 @@ Verification checked(int inliers, bool verified, int matches = -1) {
 
 TEST(CandidateScorer, IsTheLogisticOfItsFeatures) {
   ScoringParams params;
-  params.weights = {0.5, 1.0, 0.25};
+  params.weights = {0.5, 1.0, 0.25, -0.75};
   params.bias = -2.0;
   const CandidateScorer scorer(params);
   const std::vector<double> x = scorer.features(ev(0.2, 7.0), checked(40, true));
@@ -44,7 +44,15 @@ TEST(CandidateScorer, IsTheLogisticOfItsFeatures) {
   EXPECT_NEAR(x[1], std::log1p(-log10FalseAlarms(80, 40, 0.0104, 7)), 1e-12);
   EXPECT_NEAR(x[2], std::log(7.0), 1e-12);
   EXPECT_NEAR(scorer.probability(ev(0.2, 7.0), checked(40, true)),
-              1.0 / (1.0 + std::exp(-(-2.0 + 0.5 * x[0] + x[1] + 0.25 * x[2]))), 1e-12);
+              1.0 / (1.0 + std::exp(-(-2.0 + 0.5 * x[0] + x[1] + 0.25 * x[2] - 0.75 * x[3]))), 1e-12);
+  EXPECT_EQ(x[3], 0.0) << "no other place verified";
+  CandidateScorer::Evidence aliased = ev(0.2, 7.0);
+  aliased.other_place_significance = 12.0;
+  EXPECT_NEAR(scorer.features(aliased, checked(40, true))[3], std::log1p(12.0), 1e-12);
+  EXPECT_LT(scorer.probability(aliased, checked(40, true)), scorer.probability(ev(0.2, 7.0), checked(40, true)))
+      << "another place that verifies too lowers the probability";
+  aliased.other_place_significance = std::nan("");
+  EXPECT_EQ(scorer.features(aliased, checked(40, true))[3], 0.0);
   EXPECT_EQ(scorer.features(ev(0.2, -3.0), checked(40, true))[2], 0.0) << "a saliency below 1 counts as 1";
   EXPECT_EQ(scorer.features(ev(0.2, std::nan("")), checked(40, true))[2], 0.0);
   EXPECT_EQ(scorer.features(ev(0.2, 7.0), checked(7, false))[1], 0.0) << "what chance explains is no evidence";
@@ -141,6 +149,21 @@ TEST(CandidateScorer, RejectsAWeightVectorOfAnotherLength) {
   ScoringParams params;
   params.weights = {0.513, 1.048};  // the two-feature scorer of earlier versions
   EXPECT_THROW(CandidateScorer{params}, InvalidInput);
+  params.weights = {0.669, 0.726, 0.778};  // the three-feature scorer of earlier versions
+  EXPECT_THROW(CandidateScorer{params}, InvalidInput);
+}
+
+// Early stop bounds a candidate's probability with another place's significance as far as it is
+// known; that bound holds only if more of it never raises the probability.
+TEST(CandidateScorer, RefusesAnotherPlaceThatWouldRaiseTheProbability) {
+  ScoringParams params;
+  params.weights.at(3) = 0.1;
+  try {
+    CandidateScorer{params};
+    FAIL() << "a positive weight on another place's significance was taken";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("scoring/weights[3]"), std::string::npos) << e.what();
+  }
 }
 
 // Weights so large that two terms overflow to -inf and +inf made the probability NaN, which sorts
@@ -148,12 +171,12 @@ TEST(CandidateScorer, RejectsAWeightVectorOfAnotherLength) {
 // probability on the most extreme evidence.
 TEST(CandidateScorer, WeightsBeyondAnyFitAreRefusedAndTheLargestGiveAProbability) {
   ScoringParams params;
-  params.weights = {1e308, 1e308, 0.0};
+  params.weights = {1e308, 1e308, 0.0, 0.0};
   EXPECT_THROW(CandidateScorer{params}, InvalidInput);
-  params.weights = {0.669, 0.726, 0.778};
+  params.weights = {0.669, 0.726, 0.778, 0.0};
   params.bias = -1e308;
   EXPECT_THROW(CandidateScorer{params}, InvalidInput);
-  params.weights = {1000, 1000, -1000};
+  params.weights = {1000, 1000, -1000, -1000};
   params.bias = -1000;
   const CandidateScorer scorer(params);
   Verification strongest = checked(100000, true, 100000);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <random>
 #include <tuple>
 
@@ -294,6 +295,75 @@ TEST(LoopDetector, StoppingVerificationEarlyKeepsEveryKeyframesBestCandidateAndW
   }
   EXPECT_GT(accepted, 0u);
   EXPECT_GT(skipped, 0u) << "of " << candidates << " candidates: nothing left to save";
+}
+
+// A verifier of a scene that repeats itself: every candidate has few matches, so early stop
+// would skip all but the first, and every fit is very significant (another place verifies too).
+class RepetitiveSceneVerifier : public CandidateVerifier {
+ public:
+  static constexpr int kMatches = 8;
+  static constexpr double kLog10FalseAlarms = -30.0;
+  Verification verify(const Features&, const Features&) const override {
+    Verification v;
+    v.attempted = v.verified = true;
+    v.matches = v.inliers = kMatches;
+    v.inlier_ratio = 1.0;
+    v.log10_false_alarms = kLog10FalseAlarms;
+    return v;
+  }
+  std::vector<Verification> verifyAll(const Features& query, const std::vector<Features>& candidates,
+                                      const NeedsFit& needs_fit) const override {
+    std::vector<Verification> out;
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      if (needs_fit && !needs_fit(i, kMatches, out)) {
+        Verification skipped;
+        skipped.attempted = skipped.fit_skipped = true;
+        skipped.matches = kMatches;
+        out.push_back(skipped);
+        continue;
+      }
+      out.push_back(verify(query, candidates[i]));
+    }
+    return out;
+  }
+};
+
+// Another place's significance (the scorer's aliasing input) is read off the first
+// scoring/distinct_places candidates of each map, verified whatever early stop would skip: every
+// candidate gets the same input with early stop on or off, although early stop skips fits.
+TEST(LoopDetector, AnotherPlaceIsTakenFromPlacesVerifiedOnPurposeNotFromWhatEarlyStopLeft) {
+  const std::vector<cv::Mat>& frames = test::sampleFrames();
+  DetectorParams every = fixtureParams();
+  every.scoring.weights.at(3) = -0.5;
+  every.verification.early_stop = false;
+  DetectorParams early = every;
+  early.verification.early_stop = true;
+  LoopDetector reference(every), detector(early);
+  reference.setVerifier(std::make_unique<RepetitiveSceneVerifier>());
+  detector.setVerifier(std::make_unique<RepetitiveSceneVerifier>());
+  size_t skipped = 0, other_places = 0;
+  const auto byId = [](const DetectionResult& r) {
+    std::map<uint64_t, const LoopCandidate*> all;
+    for (const auto* list : {&r.candidates, &r.unreported}) {
+      for (const LoopCandidate& c : *list) all[c.id] = &c;
+    }
+    return all;
+  };
+  for (size_t i = 0; i < frames.size(); ++i) {
+    SCOPED_TRACE("keyframe " + std::to_string(i));
+    const DetectionResult a = processImage(reference, frames[i], PixelFormat::kGray, 0.5 * i, i);
+    const DetectionResult b = processImage(detector, frames[i], PixelFormat::kGray, 0.5 * i, i);
+    const auto seen_a = byId(a), seen_b = byId(b);
+    ASSERT_EQ(seen_a.size(), seen_b.size());
+    for (const auto& [id, c] : seen_b) {
+      ASSERT_EQ(seen_a.count(id), 1u);
+      EXPECT_EQ(c->other_place_significance, seen_a.at(id)->other_place_significance) << "candidate " << id;
+      skipped += c->verification.fit_skipped ? 1 : 0;
+      other_places += c->other_place_significance > 0.0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(skipped, 0u) << "early stop skipped nothing: the test shows nothing";
+  EXPECT_GT(other_places, 0u) << "no candidate had another place that verified";
 }
 
 // A front-end's keyframes can be sparse and a session short: a revisit at the first keyframe that

@@ -192,7 +192,7 @@ TEST(Parameters, RejectsBadValuesNamingTheParameter) {
   // Each candidate is verified: unbounded counts made a keyframe's work the whole map's.
   expectRejected("detector: {max_candidates: 101}", "detector/max_candidates");
   expectRejected("detector: {similarity_candidates: 2147483647}", "detector/similarity_candidates");
-  expectRejected("scoring: {weights: [1e308, 1e308, 0]}", "scoring/weights");
+  expectRejected("scoring: {weights: [1e308, 1e308, 0, 0]}", "scoring/weights");
   expectRejected("scoring: {bias: -1e308}", "scoring/bias");
   expectRejected("index: {bucket_cap_factor: 0}", "index/bucket_cap_factor");
   expectRejected("detector: {min_probability: 1.5}", "detector/min_probability");

@@ -28,23 +28,26 @@ namespace mild {
 
 struct ScoringParams {
   bool enabled = true;
-  std::vector<double> weights = {0.669, 0.726, 0.778};
+  std::vector<double> weights = {0.669, 0.726, 0.778, 0.0};
   double bias = -2.523;
   std::string filter_type = "exclusive_hypotheses";
   double decision_probability = 0.909;
   int min_comparable_keyframes = 5;
+  int distinct_places = 3;
+  int distinct_place_gap = 10;
 
-  static constexpr int kFeatures = 3;
+  static constexpr int kFeatures = 4;
   static constexpr const char* kSection = "scoring";
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("enabled", p.enabled, Bounds::any(),
       "The published loop probability of every candidate: a logistic model of the filter's probability and the "
       "keyframe's own evidence, x = [logit(filter probability) within +-4, ln(1 + significance), ln(max(1, "
-      "saliency))], "
+      "saliency)), ln(1 + another place's significance)], "
       "significance being -log10 of the verified model's number of false alarms given the matches, the inlier "
       "tolerance and the image area (0 when chance explains it) and saliency the robust z of its similarity "
-      "among the query's eligible keyframes: p = 1 / (1 + exp(-(bias + weights . x))), fitted by maximum "
+      "among the query's eligible keyframes, and another place's significance that of the most significant of "
+      "the distinct places verified on purpose (distinct_places) more than distinct_place_gap keyframes away: p = 1 / (1 + exp(-(bias + weights . x))), fitted by maximum "
       "likelihood so that it is P(a true loop). A candidate that fails verification keeps its probability, "
       "capped just below decision_probability, and accepted is exactly probability >= decision_probability. Off "
       "(or verification off) gives the filter's probability as it is.");
@@ -68,8 +71,15 @@ struct ScoringParams {
       "(saliency 1, filter probability 0.5) and the probability rests on the geometry's significance: a loop at "
       "the first eligible keyframe is then the best candidate, more likely than not, and accepted once there "
       "are keyframes to compare it with. 0 = never.");
+    v("distinct_places", p.distinct_places, Bounds::in(0, 64),
+      "How many of a map's candidates, in the order they are proposed (the filter's best, then the most similar), "
+      "are verified whatever verification/early_stop would skip: the places another place's significance is "
+      "taken from.");
+    v("distinct_place_gap", p.distinct_place_gap, Bounds::in(0, 1000000),
+      "Keyframes between two candidates of one map for them to count as distinct places (another place's "
+      "significance ignores the candidates within this many keyframes of the one scored).");
   }
-  void validate() const { validateDeclared(*this); }
+  void validate() const;
 };
 
 class CandidateScorer {
@@ -82,6 +92,10 @@ class CandidateScorer {
     double filter_probability = 0.0;
     double saliency = 0.0;
     size_t eligible_keyframes = 0;  // of the map it was found in
+    // The significance (-log10 NFA, at least 0) of the most significant other distinct place of the
+    // same map verified on purpose: an aliased place verifies as well as the true one does, a
+    // revisit of a place unlike the rest does not have a second place that verifies.
+    double other_place_significance = 0.0;
   };
   // The features of one candidate, in the order of ScoringParams::weights, and their names (the
   // columns mild_offline --details writes for scripts/fit_scoring.py).
@@ -99,6 +113,10 @@ class CandidateScorer {
 // its own (calibrated like every other) but strictly below decision_probability, so that it is
 // never accepted.
 double belowDecision(double probability, double decision_probability);
+
+// A verification's significance against chance, -log10 of its number of false alarms, at least 0
+// (0 without a model).
+double significanceOf(const Verification& verification);
 
 // The decision probability for a wrong loop costing `wrong_loop_cost` missed ones: accepting is
 // worth it when (1 - p) c < p, i.e. p >= c / (1 + c) (10 gives 0.909).

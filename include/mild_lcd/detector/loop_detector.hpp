@@ -103,6 +103,9 @@ struct LoopCandidate {
   double similarity = 0.0;          // Phi' of the query against this keyframe
   double saliency = 0.0;            // its robust z among the query's eligible keyframes (robustSaliency)
   size_t eligible_keyframes = 0;    // how many keyframes of its map were eligible (and compared)
+  // The significance of the most significant other distinct place of its map verified on purpose
+  // (CandidateScorer::Evidence::other_place_significance).
+  double other_place_significance = 0.0;
   bool accepted = false;            // probability >= scoring/decision_probability (so verified, when verifying)
   Verification verification;        // geometric check (verified=false, inliers=0 when verification is off)
 };
@@ -224,7 +227,7 @@ class LoopDetector {
 
   // The scorer's inputs of a candidate (CandidateScorer::Evidence).
   static CandidateScorer::Evidence evidenceOf(const LoopCandidate& c) {
-    return {c.filter_probability, c.saliency, c.eligible_keyframes};
+    return {c.filter_probability, c.saliency, c.eligible_keyframes, c.other_place_significance};
   }
   const CandidateScorer& scorer() const { return scorer_; }
 
@@ -242,6 +245,15 @@ class LoopDetector {
   void checkFeatures(const Features& features) const;
   // Where this detector's own keyframe at `stamp` may find candidates (exclusion, near-past band).
   MapScope ownScope(double stamp) const;
+  // Which candidates are verified on purpose, whatever early stop would skip: the first
+  // scoring/distinct_places of each map, in the order they were proposed.
+  std::vector<bool> verifiedOnPurpose(const std::vector<const KeyframeMap*>& maps) const;
+  // Candidate i's other_place_significance: the most significant of the candidates verified on
+  // purpose (of those in `verifications`, the first verifications.size()) in its map and more than
+  // scoring/distinct_place_gap keyframes from it.
+  double otherPlaceSignificance(const std::vector<LoopCandidate>& candidates, size_t i,
+                                const std::vector<const KeyframeMap*>& maps, const std::vector<bool>& on_purpose,
+                                const std::vector<Verification>& verifications) const;
   // The probability candidate c is published with, given verification v: the scorer's, through the
   // verification gate (belowDecision) when v failed; the filter's when not verifying.
   double publishedProbability(const LoopCandidate& c, const Verification& v) const;

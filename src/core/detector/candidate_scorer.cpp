@@ -25,13 +25,30 @@ std::vector<double> CandidateScorer::features(const Evidence& e, const Verificat
   // The geometry's evidence against chance, scale-free (chance_agreement.hpp); its logarithm, because
   // past a few orders of magnitude more significance says little more about a loop (an aliased
   // place gives a model as significant as the true one).
-  const double significance = std::isfinite(v.log10_false_alarms) ? std::max(0.0, -v.log10_false_alarms) : 0.0;
-  return {std::log(p / (1.0 - p)), std::log1p(significance), std::log(z)};
+  // Another distinct place that verifies too says the scene repeats itself (the same furniture in
+  // two rooms, identical doors): the fitted weight is at most 0, so it can only lower the probability.
+  const double other = std::isfinite(e.other_place_significance) ? std::max(0.0, e.other_place_significance) : 0.0;
+  return {std::log(p / (1.0 - p)), std::log1p(significanceOf(v)), std::log(z), std::log1p(other)};
 }
 
 const std::vector<std::string>& CandidateScorer::featureNames() {
-  static const std::vector<std::string> names = {"x_filter_logodds", "x_ln_significance", "x_ln_saliency"};
+  static const std::vector<std::string> names = {"x_filter_logodds", "x_ln_significance", "x_ln_saliency",
+                                                 "x_ln_other_place_significance"};
   return names;
+}
+
+void ScoringParams::validate() const {
+  validateDeclared(*this);
+  // Early stop bounds a candidate's probability from above with another place's significance as
+  // known so far (none yet = 0): that holds only while more of it can never raise the probability.
+  if (weights.size() == static_cast<size_t>(kFeatures) && weights[3] > 0.0) {
+    throw InvalidInput("scoring/weights[3] (another place's significance) must be at most 0, got " +
+                       std::to_string(weights[3]));
+  }
+}
+
+double significanceOf(const Verification& v) {
+  return std::isfinite(v.log10_false_alarms) ? std::max(0.0, -v.log10_false_alarms) : 0.0;
 }
 
 double belowDecision(double probability, double decision_probability) {

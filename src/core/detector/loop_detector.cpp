@@ -244,16 +244,26 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features*
     std::vector<Features> candidate_features;
     candidate_features.reserve(candidates.size());
     for (size_t i = 0; i < candidates.size(); ++i) candidate_features.push_back(maps[i]->features(candidates[i].index));
-    CandidateVerifier::NeedsFit needs_fit;
-    if (params_.verification.early_stop) {
-      needs_fit = [&](size_t i, int matches, const std::vector<Verification>& earlier) {
-        return fitCanMatter(candidates, i, matches, earlier);
-      };
-    }
+    // The distinct places are verified on purpose, before early stop may skip anything: another
+    // place's significance is then the same whether early stop is on or off.
+    const std::vector<bool> on_purpose = verifiedOnPurpose(maps);
+    const bool early_stop = params_.verification.early_stop;
+    const CandidateVerifier::NeedsFit needs_fit = [&](size_t i, int matches, const std::vector<Verification>& earlier) {
+      if (on_purpose[i] || !early_stop) return true;
+      // Each map's candidates verified on purpose come first among its own, so they are all in
+      // `earlier` by now: the candidates' other places are known.
+      for (size_t k = 0; k <= i; ++k) {
+        candidates[k].other_place_significance = otherPlaceSignificance(candidates, k, maps, on_purpose, earlier);
+      }
+      return fitCanMatter(candidates, i, matches, earlier);
+    };
     std::vector<Verification> verifications = verifier_->verifyAll(*query, candidate_features, needs_fit);
     if (verifications.size() != candidates.size()) {
       throw std::logic_error("the candidate verifier returned " + std::to_string(verifications.size()) +
                              " verifications for " + std::to_string(candidates.size()) + " candidates");
+    }
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      candidates[i].other_place_significance = otherPlaceSignificance(candidates, i, maps, on_purpose, verifications);
     }
     for (size_t i = 0; i < candidates.size(); ++i) candidates[i].verification = std::move(verifications[i]);
   }
@@ -262,6 +272,33 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features*
     c.accepted = c.probability >= params_.scoring.decision_probability;
   }
   rankCandidates(candidates, params_.candidates.min_probability);
+}
+
+std::vector<bool> LoopDetector::verifiedOnPurpose(const std::vector<const KeyframeMap*>& maps) const {
+  std::vector<bool> on_purpose(maps.size(), false);
+  const auto wanted = static_cast<size_t>(params_.scoring.distinct_places);
+  for (size_t i = 0; i < maps.size(); ++i) {
+    size_t before = 0;
+    for (size_t k = 0; k < i; ++k) before += maps[k] == maps[i] ? 1 : 0;
+    on_purpose[i] = before < wanted;
+  }
+  return on_purpose;
+}
+
+double LoopDetector::otherPlaceSignificance(const std::vector<LoopCandidate>& candidates, size_t i,
+                                            const std::vector<const KeyframeMap*>& maps,
+                                            const std::vector<bool>& on_purpose,
+                                            const std::vector<Verification>& verifications) const {
+  const auto gap = static_cast<KeyframeIndex>(params_.scoring.distinct_place_gap);
+  double most = 0.0;
+  for (size_t j = 0; j < verifications.size(); ++j) {
+    // Another robot's map showing the place too is the place seen twice, not a repetition of it.
+    if (j == i || !on_purpose[j] || maps[j] != maps[i]) continue;
+    const KeyframeIndex a = candidates[i].index, b = candidates[j].index;
+    if ((a > b ? a - b : b - a) <= gap) continue;
+    most = std::max(most, significanceOf(verifications[j]));
+  }
+  return most;
 }
 
 double LoopDetector::publishedProbability(const LoopCandidate& c, const Verification& v) const {
