@@ -84,19 +84,21 @@ except OSError:
 tables = {"real": [], "rendered": []}
 for spec in specs:
     name, folder = spec.split("=", 1)
-    m = json.loads(subprocess.run([f"{os.environ['BIN']}/mild_score", f"{folder}/gt_loops.txt", f"{out}/{name}.csv", "--json"],
-                                  capture_output=True, text=True, check=True).stdout)
+    config = ["--config", os.environ["CONFIG"]] if os.environ.get("CONFIG") else []
+    m = json.loads(subprocess.run([f"{os.environ['BIN']}/mild_score", f"{folder}/gt_loops.txt", f"{out}/{name}.csv", "--json"]
+                                  + config, capture_output=True, text=True, check=True).stdout)
+    decision = m["decision_probability"]
     stats = json.load(open(f"{out}/{name}.json"))
     keyframe_ms = stats.get("keyframe_ms", {}).get("median", 0.0)
     row = (f"| {name} | {m['recall_at_100_precision']:.3f} | {m['average_precision']:.3f} | {m['max_f1']:.3f} | "
-           f"{m['precision_at_half']:.3f} ({m['wrong_at_half']} wrong) | {m['recall_at_half']:.3f} | {keyframe_ms:.1f} | "
+           f"{m['precision_at_decision']:.3f} ({m['wrong_at_decision']} wrong) | {m['recall_at_decision']:.3f} | {keyframe_ms:.1f} | "
            + " | ".join(peers.get(name, ["-"] * 5)) + " |")
     tables["real" if "/real/" in folder + "/" else "rendered"].append(row)
 for title, rows in tables.items():
     if not rows:
         continue
     print(f"\n{title} frames: mild_lcd's recall@100%P, AP and max F1, then each peer's recall@100%P / AP (PEERS.md)\n")
-    print("| sequence | recall@100%P | AP | max F1 | p >= 0.5: precision | p >= 0.5: recall | keyframe ms (median) | "
+    print(f"| sequence | recall@100%P | AP | max F1 | p >= {decision:g} (the decision): precision | recall | keyframe ms (median) | "
           + " | ".join(peer_names) + " |")
     print("|---" * (7 + len(peer_names)) + "|")
     print("\n".join(rows))

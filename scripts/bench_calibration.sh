@@ -29,12 +29,12 @@ mild_install_deps
 "$REPO/scripts/install_deps.sh" "$REPO/scripts/debian-packages-bench.txt"  # numpy, PyYAML (matplotlib: debian-packages.txt)
 mild_configure_and_build --target mild_offline >/dev/null
 BIN="$BUILD_DIR/devel/lib/mild_lcd"
-mkdir -p "$OUT" "$CACHE/steps"
+mkdir -p "$OUT"
 
 runs=()  # descriptor/name=folder
 add() {  # source folder, name, step
-  local dir="$CACHE/steps/${2}_k$3"
-  [[ -f "$dir/gt_loops.txt" ]] || /usr/bin/python3 "$BENCH/subsample.py" "$1" "$3" "$dir" >/dev/null
+  local dir
+  dir=$(mild_step_sequence "$1" "$2" "$3")
   for d in ${DESCRIPTORS//,/ }; do runs+=("$d/${2}_k$3=$dir"); done
 }
 HOLDOUT_SEEDS="${HOLDOUT_SEEDS-411,412}"

@@ -22,12 +22,11 @@ mild_install_deps
 mild_configure_and_build --target mild_offline >/dev/null
 CACHE="${MILD_BENCH_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/mild_lcd/bench}"
 step_of() {  # source folder, name, step: the subsampled sequence in the cache, "name_kstep=folder"
-  local dir="$CACHE/steps/${2}_k$3"
-  [[ -f "$dir/gt_loops.txt" ]] || /usr/bin/python3 "$BENCH/subsample.py" "$1" "$3" "$dir" >/dev/null
+  local dir
+  dir=$(mild_step_sequence "$1" "$2" "$3")
   echo "${2}_k$3=$dir"
 }
 if [[ -z "${SEQUENCES:-}" && "${ROWS:-}" == frontier ]]; then
-  mkdir -p "$CACHE/steps"
   SEQUENCES=""
   for s in gp_day_a gp_night_a; do for k in 1 2; do SEQUENCES+=" $(step_of "$BENCH/real/$s" $s $k)"; done; done
   for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do SEQUENCES+=" $(step_of "$BENCH/$s" $s 5)"; done

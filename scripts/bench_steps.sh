@@ -22,12 +22,12 @@ mild_install_deps
 "$REPO/scripts/install_deps.sh" "$REPO/scripts/debian-packages-bench.txt"  # the generator's OpenCV and numpy
 mild_configure_and_build --target mild_offline >/dev/null
 BIN="$BUILD_DIR/devel/lib/mild_lcd"
-mkdir -p "$OUT" "$CACHE/steps"
+mkdir -p "$OUT"
 
 runs=()
 add() {  # source folder, name, step: the subsampled sequence (symlinks, in the cache)
-  local dir="$CACHE/steps/${2}_k$3"
-  [[ -f "$dir/gt_loops.txt" ]] || /usr/bin/python3 "$BENCH/subsample.py" "$1" "$3" "$dir" >/dev/null
+  local dir
+  dir=$(mild_step_sequence "$1" "$2" "$3")
   runs+=("${2}_k$3=$dir")
 }
 for s in pub_corridor pub_city pub_aliasing pub_campus pub_night; do

@@ -1,9 +1,9 @@
 #!/bin/bash
 # A package of someone else's, the catkin way: builds test/downstream_pkg (find_package(catkin
 # COMPONENTS mild_lcd), mild_lcd's public headers, exported libraries and messages) against the devel
-# space in $BUILD_DIR and runs its program; then the README's two examples of consuming LoopClosure
+# space in $BUILD_DIR and runs its program; then the two examples of consuming LoopClosure in docs/interface.md
 # (the package's C++ loop_closure_listener and scripts/loop_closure_listener.py), each on a private
-# master, must print the accepted loop of a LoopClosure published to them, and the README must show
+# master, must print the accepted loop of a LoopClosure published to them, and docs/interface.md must show
 # both files as they are. Writes the verdict as JUnit results that scripts/test.sh counts. Needs a
 # built $BUILD_DIR (scripts/test.sh runs it after the build).
 set -eo pipefail
@@ -41,11 +41,11 @@ else
   exit 1
 fi
 
-# The README's examples, run: a private master, each listener, one LoopClosure with an accepted and a
+# The examples of docs/interface.md ("Consuming LoopClosure"), run: a private master, each listener, one LoopClosure with an accepted and a
 # rejected candidate; the listener must print the accepted one only.
 problems=""
 for f in src/loop_closure_listener.cpp scripts/loop_closure_listener.py; do
-  /usr/bin/python3 - "$REPO/README.md" "$PKG/$f" <<'PY' || problems+="README.md does not show test/downstream_pkg/$f as it is; "
+  /usr/bin/python3 - "$REPO/docs/interface.md" "$PKG/$f" <<'PY' || problems+="docs/interface.md does not show test/downstream_pkg/$f as it is; "
 import sys
 readme, code = (open(p, encoding="utf-8").read() for p in sys.argv[1:])
 sys.exit(0 if code in readme else 1)
@@ -86,9 +86,9 @@ listen cpp_listener "$OUT/devel/lib/mild_lcd_downstream_example/loop_closure_lis
 listen python_listener /usr/bin/python3 -u "$PKG/scripts/loop_closure_listener.py"
 if [[ -z "$problems" ]]; then
   junit downstream-listeners the_readme_examples_print_accepted_loops 0 ""
-  echo "downstream: the README's C++ and Python LoopClosure examples print the accepted loop"
+  echo "downstream: the C++ and Python LoopClosure examples of docs/interface.md print the accepted loop"
 else
   junit downstream-listeners the_readme_examples_print_accepted_loops 1 "$problems"
-  echo "[mild_lcd] the README's LoopClosure examples: $problems" >&2
+  echo "[mild_lcd] the LoopClosure examples of docs/interface.md: $problems" >&2
   exit 1
 fi

@@ -27,6 +27,16 @@ mild_render_generated() {
   rm -rf "$cache/tmp_$name"
 }
 
+# Every $3-th frame of the sequence in folder $1, subsampled by ../shared/bench/subsample.py into
+# $CACHE/steps/$2_k$3 once (links; the cache outlives the build); prints that folder. Needs BENCH and
+# CACHE.
+mild_step_sequence() {
+  local dir="$CACHE/steps/${2}_k$3"
+  mkdir -p "$CACHE/steps"
+  [[ -f "$dir/gt_loops.txt" ]] || /usr/bin/python3 "$BENCH/subsample.py" "$1" "$3" "$dir" >/dev/null || return 1
+  echo "$dir"
+}
+
 mild_configure_and_build() {
   mkdir -p "$BUILD_DIR" "$ROS_HOME"
   # Debian's ROS tools need the system python, not the pyenv one first on PATH (ros-recipe gotcha 1/2).

@@ -82,13 +82,14 @@ def reliability(data, path):
         for b in used:
             ax.annotate(str(int(b[2])), (b[3], b[4]), textcoords="offset points", xytext=(4, -10), fontsize=7)
     d = data.get("decision", {})
-    ax.axvline(0.5, color="tab:red", lw=0.8, alpha=0.5)
+    ax.axvline(d.get("threshold", 0.5), color="tab:red", lw=0.8, alpha=0.5)
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("loop probability (bin mean)")
     ax.set_ylabel("fraction right")
-    ax.set_title("reliability: ECE %.3f;  at p >= 0.5: precision %.3f, recall %.3f"
-                 % (data.get("expected_calibration_error", 0.0), d.get("precision", 1.0), d.get("recall", 0.0)),
+    ax.set_title("reliability: ECE %.3f;  at the decision p >= %g: precision %.3f, recall %.3f"
+                 % (data.get("expected_calibration_error", 0.0), d.get("threshold", 0.5), d.get("precision", 1.0),
+                    d.get("recall", 0.0)),
                  fontsize=8)
     ax.legend(loc="upper left", fontsize=8)
     ax.grid(alpha=0.3)

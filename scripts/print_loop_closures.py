@@ -8,6 +8,8 @@ ROS node. Subscribes to `loop_closure` (mild_lcd/LoopClosure). Private parameter
   ~every_keyframe   also print one line per keyframe: its best candidate or "no loop", features, time
   ~frames           exit after this many LoopClosure messages, printing the score (0: run until killed)
   ~gt               gt_loops.txt whose frame indices are the keyframe ids (default: none)
+  ~config           the detector's configuration (YAML): the score's hard decision is at its
+                    scoring/decision_probability (default: the built-in defaults, config/default.yaml's)
   ~min_gap          EVALUATION.md's minimum gap (default 40)
   ~output_csv       also write the scored rows query,candidate,score to this file
   ~idle_timeout     with ~frames set, give up this many seconds after the last message (default 30)
@@ -32,6 +34,7 @@ class Printer:
         self.frames = int(rospy.get_param("~frames", 0))
         self.every_keyframe = rospy.get_param("~every_keyframe", False)
         self.gt = rospy.get_param("~gt", "")
+        self.config = rospy.get_param("~config", "")
         self.min_gap = int(rospy.get_param("~min_gap", 40))
         self.output_csv = rospy.get_param("~output_csv", "")
         self.idle_timeout = float(rospy.get_param("~idle_timeout", 30.0))
@@ -75,7 +78,9 @@ class Printer:
             for q, c, p in self.rows:
                 f.write(f"{q},{c},{p:.10g}\n")
         if self.gt:
-            score = subprocess.run(["rosrun", "mild_lcd", "mild_score", self.gt, path, "--min-gap", str(self.min_gap)],
+            config = ["--config", self.config] if self.config else []
+            score = subprocess.run(["rosrun", "mild_lcd", "mild_score", self.gt, path, "--min-gap", str(self.min_gap)]
+                                   + config,
                                    capture_output=True, text=True)
             print("score against " + self.gt + ":\n" + (score.stdout or score.stderr).rstrip(), flush=True)
             if score.returncode != 0:

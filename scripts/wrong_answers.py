@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """What the detector's wrong answers are: each query's best candidate that the ground truth calls
-wrong, at probability >= 0.5 (the answers a back-end acts on) and among the highest-ranked ones
-(those that end recall@100%P), sorted into kinds measured from the bench's own files.
+wrong, at the configuration's decision (scoring/decision_probability: the answers a back-end that
+acts on LoopCandidate.accepted takes) and among the highest-ranked ones (those that end recall@100%P), sorted into kinds measured from the bench's own files.
 
 Rendered sequences (poses.txt, visible_points.txt), by the first rule that holds:
   - "query sees no wall": the query or the candidate sees no wall sample point within 25 m
@@ -18,14 +18,31 @@ of query and candidate:
   - "near miss": |k - j| <= 10 route frames (the rule's true pairs are |k - j| <= 2);
   - "another place": anything else.
 
-Usage: wrong_answers.py RUN [RUN ...] [--top N] [--json OUT]
+Usage: wrong_answers.py RUN [RUN ...] [--top N] [--json OUT] [--config CONFIG.yaml]
 RUN is NAME=SEQUENCE_DIR:CANDIDATES.csv (mild_offline --output). --top N also classifies the N
-highest-ranked wrong answers of each run (default 10).
+highest-ranked wrong answers of each run (default 10). --config is the detector configuration the
+runs used, whose scoring/decision_probability is the decision (default config/default.yaml).
 """
 import json
 import math
+import os
 import sys
 from collections import Counter
+
+import yaml
+
+DEFAULT_CONFIG = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "config", "default.yaml")
+
+
+def decision_probability(config_path):
+    """scoring/decision_probability of a detector configuration; config/default.yaml's when the file
+    does not set it (a configuration lists only what it changes)."""
+    with open(DEFAULT_CONFIG) as f:
+        value = yaml.safe_load(f)["scoring"]["decision_probability"]
+    if config_path:
+        with open(config_path) as f:
+            value = ((yaml.safe_load(f) or {}).get("scoring") or {}).get("decision_probability", value)
+    return float(value)
 
 
 def load_gt(seq):
@@ -89,18 +106,23 @@ def classifier(seq):
 
 def main():
     args = sys.argv[1:]
-    top, json_out = 10, None
+    top, json_out, config = 10, None, None
     if "--top" in args:
         top = int(args[args.index("--top") + 1])
         del args[args.index("--top"):args.index("--top") + 2]
     if "--json" in args:
         json_out = args[args.index("--json") + 1]
         del args[args.index("--json"):args.index("--json") + 2]
+    if "--config" in args:
+        config = args[args.index("--config") + 1]
+        del args[args.index("--config"):args.index("--config") + 2]
     if not args:
         sys.exit(__doc__)
+    decision = decision_probability(config)
+    print(f"decision: probability >= {decision:g} (scoring/decision_probability of {config or 'config/default.yaml'})\n")
     report = {}
-    totals = {"at_half": Counter(), "top": Counter()}
-    print("| sequence | wrong at p >= 0.5 | of which | highest-ranked wrong answers | of which |")
+    totals = {"at_decision": Counter(), "top": Counter()}
+    print(f"| sequence | wrong at p >= {decision:g} | of which | highest-ranked wrong answers | of which |")
     print("|---|---|---|---|---|")
     for spec in args:
         name, rest = spec.split("=", 1)
@@ -109,14 +131,14 @@ def main():
         kind_of = classifier(seq)
         wrong = sorted(((s, i, j) for i, (j, s) in best_candidates(csv_path).items()
                         if (i, j) not in truth and (i, j) not in dont_care), reverse=True)
-        at_half = Counter(kind_of(i, j) for s, i, j in wrong if s >= 0.5)
+        at_decision = Counter(kind_of(i, j) for s, i, j in wrong if s >= decision)
         highest = Counter(kind_of(i, j) for s, i, j in wrong[:top])
-        totals["at_half"].update(at_half)
+        totals["at_decision"].update(at_decision)
         totals["top"].update(highest)
-        report[name] = {"at_half": dict(at_half), "top": dict(highest)}
+        report[name] = {"at_decision": dict(at_decision), "top": dict(highest)}
         fmt = lambda c: ", ".join(f"{k} {v}" for k, v in c.most_common()) or "-"
-        print(f"| {name} | {sum(at_half.values())} | {fmt(at_half)} | {min(top, len(wrong))} | {fmt(highest)} |")
-    for key, label in (("at_half", "wrong at p >= 0.5"), ("top", f"the {top} highest-ranked per sequence")):
+        print(f"| {name} | {sum(at_decision.values())} | {fmt(at_decision)} | {min(top, len(wrong))} | {fmt(highest)} |")
+    for key, label in (("at_decision", f"wrong at p >= {decision:g}"), ("top", f"the {top} highest-ranked per sequence")):
         c = totals[key]
         n = sum(c.values())
         if n:
@@ -124,7 +146,8 @@ def main():
                   ", ".join(f"{k} {v} ({100 * v / n:.0f} %)" for k, v in c.most_common()))
     if json_out:
         with open(json_out, "w") as f:
-            json.dump({"runs": report, "totals": {k: dict(v) for k, v in totals.items()}}, f, indent=1)
+            json.dump({"decision_probability": decision, "runs": report,
+                       "totals": {k: dict(v) for k, v in totals.items()}}, f, indent=1)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 #include "common/tool_main.hpp"
 
+#include "common/decision_line.hpp"
 #include "common/image_sequence.hpp"
 #include "common/npy_writer.hpp"
 #include "common/progress_bar.hpp"
@@ -267,18 +268,19 @@ void writeStats(const Options& opt, const DetectionPass& pass, const mild::LoopD
   if (!out) throw mild::InvalidInput(opt.stats + ": cannot write the stats file");
 }
 
-// Score what was written, exactly as the referee reads it.
-void scoreCandidates(const Options& opt, const mild::GroundTruth& truth, size_t n) {
+// Score what was written, exactly as the referee reads it; the hard decision at the configuration's
+// scoring/decision_probability.
+void scoreCandidates(const Options& opt, const mild::GroundTruth& truth, size_t n, double decision_probability) {
   const mild::Metrics m = mild::evaluate(truth, mild::loadCandidates(opt.output), opt.min_gap);
   std::printf("recall@100%%P: %.4f\naverage precision: %.4f\nmax F1: %.4f\n", m.recall_at_100_precision,
               m.average_precision, m.max_f1);
   std::printf("loop queries: %zu, scored queries: %zu, true positives: %zu, false positives: %zu\n", m.loop_queries,
               m.scored_queries, m.true_positives, m.false_positives);
-  const mild::Decision half = mild::decideAt(truth, mild::loadCandidates(opt.output), 0.5, opt.min_gap);
-  std::printf("at probability >= 0.5: precision %.4f, recall %.4f (%zu right, %zu wrong)\n", half.precision,
-              half.recall, half.right, half.wrong);
+  const mild::Decision decision =
+      mild::decideAt(truth, mild::loadCandidates(opt.output), decision_probability, opt.min_gap);
+  std::printf("%s\n", mild::tools::decisionLine(decision).c_str());
   if (!opt.plots.empty()) {
-    mild::tools::writeOfflinePlots(opt.plots, truth, mild::loadCandidates(opt.output), m, n, opt.min_gap);
+    mild::tools::writeOfflinePlots(opt.plots, truth, mild::loadCandidates(opt.output), m, decision, n, opt.min_gap);
   }
 }
 
@@ -334,7 +336,7 @@ int run(const Options& opt) {
   if (!opt.stats.empty()) writeStats(opt, pass, detector, n, pose_summary);
 
   if (truth) {
-    scoreCandidates(opt, *truth, n);
+    scoreCandidates(opt, *truth, n, params.scoring.decision_probability);
   } else if (!opt.plots.empty()) {
     std::cerr << "note: --plots needs --gt (the plots compare detections with ground truth); no plots written\n";
   }
@@ -350,7 +352,9 @@ int main(int argc, char** argv) {
   app.add_option("--images", opt.images, "folder of frames in file-name order, or a folder with an images/ subfolder");
   app.add_option("--config", opt.config, "YAML parameter file (see config/default.yaml)");
   app.add_option("--output", opt.output, "candidates CSV to write (query,candidate,score)");
-  app.add_option("--gt", opt.gt, "ground-truth gt_loops.txt: print recall@100%P, average precision, max F1");
+  app.add_option("--gt", opt.gt,
+                 "ground-truth gt_loops.txt: print recall@100%P, average precision, max F1, and precision and recall "
+                 "at the configuration's scoring/decision_probability");
   app.add_option("--plots", opt.plots, "folder for pr_curve.png and loops_matrix.png (needs --gt)");
   app.add_option("--stats", opt.stats, "JSON file for per-stage timing and database size");
   app.add_option("--details", opt.details,

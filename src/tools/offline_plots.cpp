@@ -23,7 +23,7 @@ std::string findScript(const std::string& name) {
 }
 
 void writeOfflinePlots(const std::string& dir, const GroundTruth& truth, const std::vector<ScoredPair>& candidates,
-                       const Metrics& metrics, size_t frames, int min_gap) {
+                       const Metrics& metrics, const Decision& decision, size_t frames, int min_gap) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) throw InvalidInput(dir + ": cannot create the plots folder (" + ec.message() + ")");
@@ -41,12 +41,11 @@ void writeOfflinePlots(const std::string& dir, const GroundTruth& truth, const s
   for (const auto& b : rel.bins)
     data["reliability"].push_back({b.lower, b.upper, b.count, b.mean_score, b.fraction_right});
   data["expected_calibration_error"] = rel.expected_calibration_error;
-  const Decision half = decideAt(truth, candidates, 0.5, min_gap);
-  data["decision"] = {{"threshold", half.threshold},
-                      {"precision", half.precision},
-                      {"recall", half.recall},
-                      {"right", half.right},
-                      {"wrong", half.wrong}};
+  data["decision"] = {{"threshold", decision.threshold},
+                      {"precision", decision.precision},
+                      {"recall", decision.recall},
+                      {"right", decision.right},
+                      {"wrong", decision.wrong}};
   const fs::path json_path = fs::path(dir) / "plot_data.json";
   std::ofstream(json_path) << data.dump();
 

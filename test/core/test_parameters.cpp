@@ -22,12 +22,12 @@ TEST(Parameters, DefaultYamlIsGeneratedFromTheDeclarations) {
          ".build/devel/lib/mild_lcd/mild_offline --print-config > config/default.yaml";
 }
 
-TEST(Parameters, TheReadmeTableIsTheDeclaration) {
-  std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
-  std::stringstream readme;
-  readme << in.rdbuf();
-  EXPECT_NE(readme.str().find(parameterMarkdown()), std::string::npos)
-      << "README.md's detector parameter table is out of date; `mild_offline --help-parameters` prints it:\n"
+TEST(Parameters, TheParameterPageIsTheDeclaration) {
+  std::ifstream in(std::string(MILD_SOURCE_DIR) + "/docs/parameters.md");
+  std::stringstream page;
+  page << in.rdbuf();
+  EXPECT_NE(page.str().find(parameterMarkdown()), std::string::npos)
+      << "docs/parameters.md's detector parameter table is out of date; `mild_offline --help-parameters` prints it:\n"
       << parameterMarkdown();
 }
 

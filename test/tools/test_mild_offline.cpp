@@ -178,18 +178,36 @@ TEST_F(MildOffline, ReportsRelativePoseErrorsWithIntrinsics) {
   EXPECT_NE(wrong_count.output.find("poses for"), std::string::npos) << wrong_count.output;
 }
 
-TEST_F(MildOffline, MildScoreReportsTheDecisionAtOneHalf) {
-  // Two loop queries (50, 60); at p >= 0.5 one right (50 -> 0), one wrong (60 -> 15); 70 is below.
+TEST_F(MildOffline, MildScoreReportsTheConfigurationsDecision) {
+  // Two loop queries (50, 60): 50 -> 0 right at 0.95, 60 -> 15 wrong at 0.93; 70 is below. Deciding
+  // at 0.9 accepts both, at 0.94 only the right one; without --config the built-in default decides.
   std::ofstream(path("gt.txt")) << "50 0 0.9 1\n60 10 0.9 1\n70 20 0.1 0\n";
-  std::ofstream(path("c.csv")) << "query,candidate,score\n50,0,0.9\n60,15,0.8\n70,20,0.2\n";
-  const ProcessResult run =
-      mild::test::runCommand(std::string(MILD_SCORE_BIN) + " " + path("gt.txt") + " " + path("c.csv") + " --json");
+  std::ofstream(path("c.csv")) << "query,candidate,score\n50,0,0.95\n60,15,0.93\n70,20,0.2\n";
+  std::ofstream(path("lenient.yaml")) << "scoring:\n  decision_probability: 0.9\n";
+  std::ofstream(path("strict.yaml")) << "scoring:\n  decision_probability: 0.94\n";
+  const std::string score = std::string(MILD_SCORE_BIN) + " " + path("gt.txt") + " " + path("c.csv");
+  const ProcessResult run = mild::test::runCommand(score + " --json --config " + path("lenient.yaml"));
   ASSERT_EQ(run.status, 0) << run.output;
   const auto m = nlohmann::json::parse(mild::test::lastLine(run.output));
-  EXPECT_EQ(m["right_at_half"].get<int>(), 1);
-  EXPECT_EQ(m["wrong_at_half"].get<int>(), 1);
-  EXPECT_DOUBLE_EQ(m["precision_at_half"].get<double>(), 0.5);
-  EXPECT_DOUBLE_EQ(m["recall_at_half"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(m["decision_probability"].get<double>(), 0.9);
+  EXPECT_EQ(m["right_at_decision"].get<int>(), 1);
+  EXPECT_EQ(m["wrong_at_decision"].get<int>(), 1);
+  EXPECT_DOUBLE_EQ(m["precision_at_decision"].get<double>(), 0.5);
+  EXPECT_DOUBLE_EQ(m["recall_at_decision"].get<double>(), 0.5);
+
+  const ProcessResult text = mild::test::runCommand(score + " --config " + path("strict.yaml"));
+  ASSERT_EQ(text.status, 0) << text.output;
+  EXPECT_NE(text.output.find("at the decision, probability >= 0.94 (scoring/decision_probability): precision 1.0000, "
+                             "recall 0.5000 (1 right, 0 wrong)"),
+            std::string::npos)
+      << text.output;
+  EXPECT_EQ(text.output.find("0.5:"), std::string::npos) << text.output;
+
+  const ProcessResult defaults = mild::test::runCommand(score + " --json");
+  ASSERT_EQ(defaults.status, 0) << defaults.output;
+  const double decision = nlohmann::json::parse(mild::test::lastLine(defaults.output))["decision_probability"];
+  EXPECT_GT(decision, 0.5);
+  EXPECT_LE(decision, 1.0);
 }
 
 TEST_F(MildOffline, ReadsAFlatFolderOfImagesAndSkipsUnreadableFrames) {

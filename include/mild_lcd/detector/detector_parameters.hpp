@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/detector/detector_params.hpp"
 #include "mild_lcd/params/parameter_source.hpp"
 
 namespace mild {
@@ -28,7 +28,7 @@ const std::vector<ParameterSection>& parameterSections();
 // declarations: of DetectorParams{} it is config/default.yaml (a test keeps the file equal);
 // mild_offline --print-config prints the effective ones.
 std::string parameterYaml(const DetectorParams& params = {});
-// The README's table of the detector's parameters (parameter, default, range, runtime, meaning).
+// docs/parameters.md's table of the detector's parameters (parameter, default, range, runtime, meaning).
 std::string parameterMarkdown();
 
 // Reads every parameter the source has (absent ones keep their defaults), rejects unknown names in

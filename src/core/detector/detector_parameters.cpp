@@ -8,6 +8,7 @@
 #include <type_traits>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/index/substring_layout.hpp"
 
 namespace mild {
 namespace {
@@ -29,6 +30,40 @@ bool inNamespaces(const std::string& name) {
 }
 
 }  // namespace
+
+DatabaseParams DetectorParams::databaseParams() const {
+  DatabaseParams p = database;
+  p.descriptor_bytes = features.descriptorBytes();
+  return p;
+}
+
+void DetectorParams::validate() const {
+  features.validate();
+  const DatabaseParams db = databaseParams();
+  db.validate();
+  // The layouts the width implies: substrings of at most 64 bits (index), 20 (sparse match).
+  const int bits = db.descriptor_bytes * 8;
+  const int fewest = std::max(SubstringLayout::kMinSubstrings,
+                              SubstringLayout::substringsFor(bits, SubstringLayout::kMaxSubstringBits));
+  if (db.index.tablesFor(bits) < fewest) {
+    throw InvalidInput("index/num_tables must be 0 (automatic) or at least " + std::to_string(fewest) + " for " +
+                       std::to_string(bits) + "-bit descriptors (substrings of at most 64 bits), got " +
+                       std::to_string(db.index.num_tables));
+  }
+  filter.validate();
+  candidates.validate();
+  if (verification.enabled) {
+    verification.validate();
+    verification.matching.validateFor(bits);
+  }
+  scoring.validate();
+  if (scoring.enabled && verification.enabled && scoring.filter_type != filter.type) {
+    throw InvalidInput("scoring/weights were fitted with filter/type " + scoring.filter_type +
+                       " but this detector runs " + filter.type +
+                       ": its probability would be miscalibrated. Refit them on runs of " + filter.type +
+                       " (scripts/fit_scoring.py) and set scoring/filter_type, or set scoring/enabled false");
+  }
+}
 
 const std::vector<ParameterSection>& parameterSections() {
   static const std::vector<ParameterSection> sections = [] {

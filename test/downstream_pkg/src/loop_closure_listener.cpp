@@ -1,4 +1,4 @@
-// Acts on the loops mild_lcd accepts (README, "Consuming LoopClosure"). Subscribes to
+// Acts on the loops mild_lcd accepts (docs/interface.md, "Consuming LoopClosure"). Subscribes to
 // `loop_closure`: remap it to the detector's (e.g. `loop_closure:=/robot/loop_closure`).
 #include <mild_lcd/LoopClosure.h>
 #include <ros/ros.h>

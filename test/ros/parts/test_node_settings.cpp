@@ -1,4 +1,4 @@
-// test_ros_parts: the node's settings (ros/node_settings.hpp): types, names, the README table, defaults.
+// test_ros_parts: the node's settings (ros/node_settings.hpp): types, names, docs/parameters.md's table, defaults.
 
 #include "ros_parts_support.hpp"
 
@@ -39,11 +39,11 @@ TEST(NodeSettings, WarnsOfCostlyExtractionOnLargeImages) {
   EXPECT_EQ(extractionCostWarning(settingsFrom("use_image_input: false\n"), "akaze"), "");
 }
 
-TEST(NodeSettings, TheReadmeTableIsTheDeclaration) {
-  std::ifstream in(std::string(MILD_SOURCE_DIR) + "/README.md");
-  const std::string readme((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  EXPECT_NE(readme.find(nodeSettingsMarkdown()), std::string::npos)
-      << "README.md's node parameter table is out of date; it must read exactly:\n"
+TEST(NodeSettings, TheParameterPageIsTheDeclaration) {
+  std::ifstream in(std::string(MILD_SOURCE_DIR) + "/docs/parameters.md");
+  const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(page.find(nodeSettingsMarkdown()), std::string::npos)
+      << "docs/parameters.md's node parameter table is out of date; it must read exactly:\n"
       << nodeSettingsMarkdown();
 }
 
