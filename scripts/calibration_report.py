@@ -14,7 +14,9 @@ Prints Markdown tables:
      -- real frames, each render kind, each keyframe step (fitted on ORB runs, as the default) and
      each descriptor (fitted on the others) -- and scored on what was left out: ECE (the referee's
      bins), recall@100%P, AP;
-  3. the runs of generated scenes whose seed is in --held-out-seeds (other rooms, routes and textures of
+  3. one table per kind of data (real day, real night, real corridors, each render kind) for the
+     descriptor the default was fitted on: 1 and 2 side by side, every keyframe step;
+  4. the runs of generated scenes whose seed is in --held-out-seeds (other rooms, routes and textures of
      every kind, rendered by ../shared/bench/generator): never fitted on, in none of the fits above,
      scored as published, as in 1, with a summary per descriptor;
 and draws a reliability diagram per kind (real day, real night, each render kind, each descriptor, and
@@ -102,7 +104,7 @@ def main():
     import score  # noqa: E402
     print(f"\nAs published (decision probability {decision}): ECE by ../shared/bench/calibration.py, "
           "recall@100%P / AP by score.py, each query's best candidate at the decision.\n")
-    published_table(runs, a.bench, calibration, score, decision)
+    published = published_table(runs, a.bench, calibration, score, decision)
 
     # 2. Left out.
     groupings = [("kind", lambda r: r["kind"]), ("descriptor", lambda r: r["descriptor"]),
@@ -132,6 +134,23 @@ def main():
     # A grouping with nothing fitted (descriptors without the fitted one, e.g. DESCRIPTORS=brisk,akaze) has no worst.
     worst = {h: max((left[r["id"]][h][0] for r in runs if h in left[r["id"]]), default=None) for h in heads}
     print("\nWorst left-out ECE: " + ", ".join(f"{h} {v:.3f}" if v is not None else f"{h} –" for h, v in worst.items()))
+
+    # 4. One table per kind, the default's descriptor: what docs/accuracy.md shows.
+    print("\nOne table per kind (the default's descriptor, as published; kind left out: the scorer refitted "
+          "without the kind, ECE on it):")
+    for label in dict.fromkeys(r["label"] for r in runs):
+        mine = [(r, row) for r, row in zip(runs, published) if r["label"] == label and r["descriptor"] in FIT_DESCRIPTORS]
+        if not mine:
+            continue
+        print(f"\n**{label}**\n")
+        print("| sequence | step | ECE | kind left out | recall@100%P / AP | precision at the decision (wrong) | recall at the decision |")
+        print("|---|---|---|---|---|---|---|")
+        for r, row in mine:
+            out = left[r["id"]].get("kind")
+            prec = "–" if math.isnan(row["precision_at_decision"]) else f"{row['precision_at_decision']:.3f}"
+            print(f"| {re.sub(r'_k[0-9]+$', '', r['name'])} | {r['step']} | {row['ece']:.3f} | "
+                  f"{f'{out[0]:.3f}' if out else '–'} | {row['recall_at_100_precision']:.3f} / {row['average_precision']:.3f} | "
+                  f"{prec} ({row['wrong_at_decision']}) | {row['recall_at_decision']:.3f} |")
 
     # 3. Never fitted.
     if held:

@@ -28,8 +28,8 @@ namespace mild {
 
 struct ScoringParams {
   bool enabled = true;
-  std::vector<double> weights = {0.669, 0.726, 0.778, 0.0};
-  double bias = -2.523;
+  std::vector<double> weights = {0.593, 0.804, 0.652, -0.733};
+  double bias = -2.537;
   std::string filter_type = "exclusive_hypotheses";
   double decision_probability = 0.909;
   int min_comparable_keyframes = 5;
