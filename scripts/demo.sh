@@ -30,7 +30,7 @@ roslaunch --wait mild_lcd replay.launch bag:="$BAG" image:=/camera/image rate:="
 LAUNCH=$!
 STARTED=("$LAUNCH" "${STARTED[@]}")
 # The printer's lines (loop closures, score) as they arrive; roslaunch ends when the printer does.
-tail -n +1 -f "$OUT/roslaunch.log" --pid="$LAUNCH" | grep --line-buffered -E '^(keyframe [0-9]+:|loop closure|processed|score|recall|average|max F1|loop queries|only)'
+tail -n +1 -f "$OUT/roslaunch.log" --pid="$LAUNCH" | grep --line-buffered -E '^(keyframe [0-9]+:|loop closure|processed|score|recall|average|max F1|loop queries|at the decision|only)'
 wait "$LAUNCH" || true
 # roslaunch exits 0 whatever its required printer did: the printer's own verdict decides.
 if ! /usr/bin/python3 -c 'import json, sys; sys.exit(0 if json.load(open(sys.argv[1]))["ok"] else 1)' \
@@ -42,5 +42,5 @@ STARTED=("${STARTED[@]:1}")
 
 echo "[mild_lcd] offline runner over the same frames, with plots"
 "$BUILD_DIR/devel/lib/mild_lcd/mild_offline" --images "$SAMPLE" --gt "$SAMPLE/gt_loops.txt" \
-  --output "$OUT/candidates.csv" --stats "$OUT/stats.json" --plots "$OUT" | grep -E '^(recall|average|max F1)'
+  --output "$OUT/candidates.csv" --stats "$OUT/stats.json" --plots "$OUT" | grep -E '^(recall|average|max F1|at the decision)'
 echo "[mild_lcd] outputs in $OUT: ros_candidates.csv, candidates.csv, pr_curve.png, loops_matrix.png, stats.json"

@@ -63,48 +63,43 @@ struct PoseGraphParams {
   static void declare(Self& p, Visit&& v) {
     v("odometry_translation_sigma", p.odometry_translation_sigma, Bounds::above(0),
       "Odometry edges: standard deviation of each translation component per metre travelled between the two "
-      "keyframes (0.02: 2 % of the distance).");
+      "keyframes (metres per metre, > 0).");
     v("odometry_translation_min", p.odometry_translation_min, Bounds::above(0),
-      "Odometry edges: at least this translation standard deviation, metres (a robot standing still).");
+      "Odometry edges: least translation standard deviation, for a robot standing still (metres, > 0).");
     v("odometry_rotation_sigma", p.odometry_rotation_sigma, Bounds::above(0),
-      "Odometry edges: heading standard deviation in radians per square root of the metres travelled (a heading "
-      "random walk).");
+      "Odometry edges: heading standard deviation per square root of the metres travelled, a heading random walk "
+      "(radians per square-root metre, > 0).");
     v("odometry_rotation_min", p.odometry_rotation_min, Bounds::above(0),
-      "Odometry edges: at least this heading standard deviation, radians.");
+      "Odometry edges: least heading standard deviation (radians, > 0).");
     v("odometry_rotation_per_rad", p.odometry_rotation_per_rad, Bounds::atLeast(0),
-      "Odometry edges: plus this fraction of the angle turned between the two keyframes (a robot that turns on "
-      "the spot: its heading is not exact either). 0 by default: 0.05 makes the odometry softer, and 5 % wrong "
-      "loops then bend the bench's pub_campus and 5,000-frame walk (docs/pose_graph.md).");
+      "Odometry edges: heading standard deviation added per radian turned between the two keyframes (radians per "
+      "radian, >= 0).");
     v("loop_rotation_sigma_deg", p.loop_rotation_sigma_deg, Bounds::above(0),
-      "Loop edges: standard deviation of the relative yaw, degrees (the relative pose's rotation is good to 2-4 "
-      "degrees median on the bench: docs/design.md, \"Relative pose\").");
+      "Loop edges: standard deviation of the relative yaw (degrees, > 0).");
     v("loop_translation_sigma", p.loop_translation_sigma, Bounds::above(0),
-      "Metric loop edges (the query keyframe had depth): standard deviation of each translation component, metres.");
+      "Metric loop edges (the query keyframe had depth): standard deviation of each translation component (metres, "
+      "> 0).");
     v("loop_bearing_sigma_deg", p.loop_bearing_sigma_deg, Bounds::above(0),
-      "Bearing loop edges (no depth): standard deviation of the baseline's direction, degrees (8-28 degrees median "
-      "on the bench, with a long tail the robust loss takes).");
+      "Bearing loop edges (no depth): standard deviation of the baseline's direction (degrees, > 0).");
     v("loop_bearing_min_m", p.loop_bearing_min_m, Bounds::above(0),
-      "Bearing loop edges: the distance from the ray is divided by sqrt(this^2 + (baseline x sigma)^2), metres: "
-      "short baselines, whose direction is poorly observed, weigh little.");
+      "Bearing loop edges: the distance from the ray is divided by sqrt(this^2 + (baseline x sigma)^2), so that "
+      "short baselines weigh little (metres, > 0).");
     v("robust_loss", p.robust_loss, Bounds::oneOf({"cauchy", "huber", "none"}),
-      "Loss on each loop edge (its whitened residual as a whole): cauchy keeps a wrong loop from bending the map "
-      "(docs/pose_graph.md measures it with 5 % wrong loops); none is plain least squares.");
+      "Loss on each loop edge's whitened residual, cauchy, huber or none (plain least squares).");
     v("robust_scale", p.robust_scale, Bounds::above(0),
-      "The loss's scale c in standard deviations: a loop edge whose whitened residual is r weighs 1 / (1 + r^2 / "
-      "c^2) (cauchy).");
+      "Scale c of the loss: with cauchy a loop edge whose whitened residual is r weighs 1 / (1 + r^2 / c^2) "
+      "(standard deviations, > 0).");
     v("outlier_threshold", p.outlier_threshold, Bounds::above(0),
-      "After a solve, a loop edge whose whitened residual exceeds this many standard deviations is reported "
-      "rejected (red in the markers); it stays in the graph, down-weighted by the loss, and may come back.");
+      "A loop edge whose whitened residual exceeds this after a solve is reported rejected, and stays in the graph "
+      "down-weighted by the loss (standard deviations, > 0).");
     v("max_iterations", p.max_iterations, Bounds::in(1, 1000),
-      "Solver iterations per update, at most (each update starts from the previous solution).");
+      "Solver iterations per update, each update starting from the previous solution (iterations, 1 to 1000).");
     v("max_solver_seconds", p.max_solver_seconds, Bounds::above(0),
-      "Wall time of one update, at most, seconds: the solver stops there with its best solution so far.");
+      "Wall time of one update, after which the solver stops with its best solution so far (seconds, > 0).");
     v("max_coordinate", p.max_coordinate, Bounds::above(0),
-      "Odometry poses (and solved estimates) farther than this from the origin, metres, are refused: a finite but "
-      "absurd value (1e300) would otherwise ruin every later solve.");
+      "Odometry poses and solved estimates farther than this from the origin are refused (metres, > 0).");
     v("max_loop_distance", p.max_loop_distance, Bounds::above(0),
-      "Metric loop measurements whose translation is longer than this, metres, are refused: two keyframes that "
-      "see the same place are not that far apart.");
+      "Metric loop measurements whose translation is longer than this are refused (metres, > 0).");
   }
   void validate() const { validateDeclared(*this); }
 };

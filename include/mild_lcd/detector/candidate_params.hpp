@@ -21,44 +21,30 @@ struct CandidateParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("exclusion_frames", p.exclusion_frames, Bounds::atLeast(0).runtime(),
-      "Temporal exclusion: keyframes fewer than exclusion_frames keyframes before the query are never candidates "
-      "and take no part in the similarity (they trivially look alike). 40 = the bench's evaluation gap (the "
-      "original code used 60).");
+      "Keyframes fewer than this many before the query are never candidates and take no part in the similarity "
+      "(keyframes, >= 0).");
     v("exclusion_seconds", p.exclusion_seconds, Bounds::atLeast(0).runtime(),
-      "When > 0, also those fewer than this many seconds before the query.");
+      "Keyframes fewer than this many seconds before the query are excluded too (seconds, >= 0; 0 = off).");
     v("near_past", p.near_past, Bounds::any(),
-      "The near-past band: beyond the exclusion, the newest keyframes whose view is still continuous with the "
-      "query's (far buildings seen while walking towards them, a slow camera at a high keyframe rate) are "
-      "excluded too. Walking back from the newest eligible keyframe, the band goes on while the number of query "
-      "features matched in the keyframe does not rise out of the valley, the fewest matched in any keyframe "
-      "between it and the query (the exclusion window included): a revisit is separated from the present by "
-      "keyframes that show neither place. No background and no warm-up: a revisit at the first eligible "
-      "keyframe is a candidate at once (place/near_past.hpp).");
+      "Whether the newest eligible keyframes whose view is still continuous with the query's, walking back while "
+      "their matched-feature count stays in its valley, are excluded too (true or false; place/near_past.hpp).");
     v("near_past_rise", p.near_past_rise, Bounds::in(0, 10),
-      "How far a keyframe's matched count must rise above the valley to end the band, in units of the "
-      "valley's square root (the spread of a count). Chosen by cross-validation over kinds and keyframe steps "
-      "(docs/accuracy.md).");
+      "Rise of a keyframe's matched-feature count above the valley that ends the near-past band (square roots of "
+      "the valley's count, 0 to 10).");
     v("max_candidates", p.max_candidates, Bounds::in(1, 100).runtime(),
-      "Up to this many candidates per keyframe are reported, best first by their published probability (each is "
-      "verified: the bound keeps a keyframe's work bounded).");
+      "Candidates reported per keyframe, best first by probability, each verified (candidates, 1 to 100).");
     v("similarity_candidates", p.similarity_candidates, Bounds::in(0, 100).runtime(),
-      "Besides the max_candidates best keyframes of the temporal filter, this many of the most similar "
-      "keyframes are verified and scored too (local maxima at least suppression_radius apart), so that a "
-      "keyframe with strong evidence is judged on it even when the filter's belief sits elsewhere. The best "
-      "max_candidates of both are reported.");
+      "Most similar keyframes verified and scored besides the filter's max_candidates best, local maxima "
+      "suppression_radius apart (keyframes, 0 to 100).");
     v("suppression_radius", p.suppression_radius, Bounds::atLeast(0).runtime(),
-      "Candidates of one kind (the filter's, the similarity's) are local maxima at least this many keyframes "
-      "apart.");
+      "Candidates of one kind (the filter's, the similarity's) are local maxima at least this far apart "
+      "(keyframes, >= 0).");
     v("min_probability", p.min_probability, Bounds::probability().runtime(),
-      "Candidates below this (calibrated) loop probability are not reported. 0 reports every keyframe's best "
-      "candidates, which precision-recall evaluation needs; for a hard decision use LoopCandidate.accepted "
-      "(scoring/decision_probability).");
+      "Candidates below this loop probability are not reported; 0 reports every keyframe's best, as evaluation "
+      "needs (probability, 0 to 1).");
     v("other_maps_per_keyframe", p.other_maps_per_keyframe, Bounds::atLeast(1).orZero(),
-      "Several robots (RobotTeam): each keyframe is looked up in its robot's own map and in this many of the other "
-      "robots' maps, taken in turn (0 = every map), so that with R robots each other map is asked every "
-      "(R - 1) / other_maps_per_keyframe keyframes and the work per keyframe stays that of 1 + "
-      "other_maps_per_keyframe queries however large the team. A revisit lasts many keyframes: it is still found, "
-      "a few keyframes later. With two robots 1 asks every map. docs/multi_robot.md measures both.");
+      "Other robots' maps each keyframe is looked up in besides its own, taken in turn (maps, 0 = every map, else "
+      ">= 1).");
   }
   void validate() const { validateDeclared(*this); }
 };

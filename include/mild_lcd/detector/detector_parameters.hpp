@@ -70,8 +70,8 @@ void visitParameters(P& p, Visit&& visit) {
   visitSection(p.database.index, visit);
   visitSection(p.database.similarity, visit);
   visit(std::string("similarity/search"), p.search, Bounds::oneOf({"index", "exact"}),
-        "\"index\" (multi-index hashing, the method) or \"exact\" (brute force over every stored feature: the "
-        "accuracy ceiling, for evaluation only; orders of magnitude slower).");
+        "How a query searches the stored features, index (multi-index hashing) or exact (brute force over every "
+        "stored feature, for evaluation only).");
   visitSection(p.filter, visit);
   forEachSection(p.filter.filters, [&](auto& section) { visitSection(section, visit); });
   visitSection(p.candidates, visit);

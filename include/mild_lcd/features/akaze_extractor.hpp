@@ -22,12 +22,11 @@ struct AkazeParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
-      "Upper bound on AKAZE features per keyframe of features/reference_pixels pixels.");
+      "Most AKAZE features kept per keyframe of features/reference_pixels pixels, strongest first (count, >= 1).");
     v("threshold", p.threshold, Bounds::between(0, 1),
-      "Detector response threshold. OpenCV's default 0.001 keeps ~30 features on the bench's 320 x 240 frames, "
-      "0.0001 180 to 270.");
-    v("octaves", p.octaves, Bounds::in(1, 8), "Scale-space octaves.");
-    v("octave_layers", p.octave_layers, Bounds::in(1, 8), "Sub-levels per octave.");
+      "AKAZE's detector response threshold (response units, above 0 and below 1).");
+    v("octaves", p.octaves, Bounds::in(1, 8), "Scale-space octaves of AKAZE (count, 1 to 8).");
+    v("octave_layers", p.octave_layers, Bounds::in(1, 8), "Sub-levels per octave of AKAZE (count, 1 to 8).");
   }
   void validate() const { validateDeclared(*this); }
 };

@@ -20,12 +20,10 @@ struct BriskParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
-      "Upper bound on BRISK features per keyframe of features/reference_pixels pixels.");
-    v("threshold", p.threshold, Bounds::in(1, 255),
-      "AGAST detection threshold in grey levels (OpenCV's default is 30). 10, as ORB's FAST threshold: on the "
-      "bench's 320 x 240 frames 30 keeps ~130 features, 20 ~350, 10 the full 800.");
-    v("octaves", p.octaves, Bounds::in(0, 8), "Scale-space octaves.");
-    v("pattern_scale", p.pattern_scale, Bounds::in(0.25, 8), "Scale of the sampling pattern.");
+      "Most BRISK features kept per keyframe of features/reference_pixels pixels, strongest first (count, >= 1).");
+    v("threshold", p.threshold, Bounds::in(1, 255), "AGAST detection threshold of BRISK (grey levels, 1 to 255).");
+    v("octaves", p.octaves, Bounds::in(0, 8), "Scale-space octaves of BRISK (count, 0 to 8).");
+    v("pattern_scale", p.pattern_scale, Bounds::in(0.25, 8), "Scale of BRISK's sampling pattern (factor, 0.25 to 8).");
   }
   void validate() const { validateDeclared(*this); }
 };

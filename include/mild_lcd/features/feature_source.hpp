@@ -30,24 +30,17 @@ struct FeatureParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("type", p.type, Bounds::oneOf(featureTypes()),
-      "The feature extractor for image input, one of the sections below (each states its descriptor width). Its "
-      "descriptor width becomes the database's, and the saved map's: a map is loaded only by a detector of the "
-      "same width.");
+      "Feature extractor for image input, orb (256-bit descriptors), brisk (512) or akaze (486), whose descriptor "
+      "width becomes the map's.");
     v("descriptor_bytes", p.descriptor_bytes, Bounds::in(kMinDescriptorBytes, kMaxDescriptorBytes).orZero(),
-      "Width of the stored descriptors in bytes; 0 = the extractor's. Another value serves Keyframe input from a "
-      "front-end with a descriptor of its own (e.g. 16 for BRIEF-16); images are then refused.");
+      "Width of the stored descriptors in bytes, 0 (the extractor's) or 8 to 64; another width serves a "
+      "front-end's own Keyframe descriptors and refuses images.");
     v("reference_pixels", p.reference_pixels, Bounds::atLeast(0),
-      "The extractor's num_features is meant for images of this many pixels (320 x 240); other sizes keep "
-      "num_features x sqrt(pixels / reference_pixels), at most 4 x num_features: 1,386 of ORB's 800 on 640 x "
-      "360, 1,600 on 640 x 480. On real 640 x 360 frames 800 features found a true candidate among the best "
-      "three for 80 of 100 queries and 1,500 for 87 (docs/accuracy.md). 0 = num_features at any size.");
+      "Image size in pixels (>= 0) that the extractors' num_features is meant for: other sizes scale it by "
+      "sqrt(pixels / reference_pixels), at most 4 times, and 0 keeps it at any size.");
     v("max_pixels", p.max_pixels, Bounds::atLeast(kMinCappedPixels).orZero(),
-      "Frames with more pixels are shrunk to at most this many before extraction (keypoints mapped back to the "
-      "frame's pixels, the fit's inlier tolerances widened by the shrink), so that a large camera costs what this "
-      "size costs; num_features then follows the shrunk size. 0 = every frame at its own size. "
-      "config/real_cameras_budget.yaml uses 76,800 (320 x 240) with AKAZE at one sub-level per octave: on real "
-      "640 x 360 frames the day accuracy of full-size AKAZE, and more at night than ORB's, at about ORB's cost "
-      "(docs/accuracy.md).");
+      "Frames of more pixels than this are shrunk to it before extraction, keypoints mapped back to the frame's "
+      "pixels (pixels, 0 = never, else >= 4096).");
   }
 
   // An extractor's section, e.g. section<OrbParams>().num_features.

@@ -19,16 +19,13 @@ struct OrbParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_features", p.num_features, Bounds::atLeast(1),
-      "Upper bound on ORB features per keyframe of features/reference_pixels pixels (the seed paper uses up to "
-      "800); the strongest are kept.");
-    v("scale_factor", p.scale_factor, Bounds::aboveUpTo(1, 4), "Image pyramid: scale step between levels.");
-    v("num_levels", p.num_levels, Bounds::in(1, 32), "Image pyramid: number of levels.");
-    v("fast_threshold", p.fast_threshold, Bounds::in(1, 255),
-      "FAST corner threshold in grey levels. 10 rather than OpenCV's 20: low-texture scenes (plaster corridors) "
-      "then still yield ~500 features instead of ~240, and recall@100%P on pub_city rises from 0.71 to 0.87 for "
-      "1.5-2x the query time.");
+      "Most ORB features kept per keyframe of features/reference_pixels pixels, strongest first (count, >= 1).");
+    v("scale_factor", p.scale_factor, Bounds::aboveUpTo(1, 4),
+      "Scale step between the levels of ORB's image pyramid (ratio, above 1 and up to 4).");
+    v("num_levels", p.num_levels, Bounds::in(1, 32), "Levels of ORB's image pyramid (count, 1 to 32).");
+    v("fast_threshold", p.fast_threshold, Bounds::in(1, 255), "FAST corner threshold of ORB (grey levels, 1 to 255).");
     v("edge_threshold", p.edge_threshold, Bounds::in(3, 255),
-      "Border without features, in pixels; also the descriptor patch size.");
+      "Border without features, also the descriptor's patch size (pixels, 3 to 255).");
   }
   void validate() const { validateDeclared(*this); }
 };

@@ -26,24 +26,21 @@ struct ExclusiveHypothesisParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("loop_persistence", p.loop_persistence, Bounds::probability(),
-      "P(a loop continues from one keyframe to the next).");
+      "P(a loop continues from one keyframe to the next) (probability, 0 to 1).");
     v("loop_onset", p.loop_onset, Bounds::probability(),
-      "P(a loop starts at this keyframe), spread evenly over the eligible keyframes.");
+      "P(a loop starts at this keyframe), spread evenly over the eligible keyframes (probability, 0 to 1).");
     v("motion_kernel", p.motion_kernel, Bounds::list(1, 64, Bounds::atLeast(0)),
-      "Where the matched keyframe moves per new keyframe: weights of advancing 0, 1, 2, ... keyframes along the "
-      "old trajectory (at least one positive). Revisits advance; aliasing tends to stay on one stored keyframe.");
+      "Weights of the matched keyframe advancing 0, 1, 2, ... keyframes along the old trajectory per new keyframe "
+      "(1 to 64 weights, each >= 0, at least one positive).");
     v("no_loop_likelihood", p.no_loop_likelihood, Bounds::above(0),
-      "Likelihood of \"no loop\", in units of robust saliency (z), with no_loop_reference_keyframes eligible "
-      "keyframes (see no_loop_growth).");
+      "Likelihood of no loop at no_loop_reference_keyframes eligible keyframes (robust saliency z, > 0).");
     v("no_loop_growth", p.no_loop_growth, Bounds::in(0, 2),
-      "The no-loop likelihood grows as (eligible keyframes / no_loop_reference_keyframes)^no_loop_growth (never "
-      "below 1): the largest saliency among keyframes of no loop grows with their number, from about 3 at 50 "
-      "keyframes to 11-13 at 1,000 on every kind of the bench, real frames included (docs/accuracy.md). 0 = a "
-      "constant no_loop_likelihood, the earlier design.");
+      "Exponent of the no-loop likelihood's growth as (eligible keyframes / "
+      "no_loop_reference_keyframes)^no_loop_growth, never below 1 (exponent, 0 = constant, up to 2).");
     v("no_loop_reference_keyframes", p.no_loop_reference_keyframes, Bounds::above(0),
-      "Eligible keyframes at which the no-loop likelihood is no_loop_likelihood.");
+      "Eligible keyframes at which the no-loop likelihood is no_loop_likelihood (keyframes, > 0).");
     v("candidate_window", p.candidate_window, Bounds::atLeast(0),
-      "A candidate's loop probability is the posterior mass within +-candidate_window keyframes.");
+      "A candidate's filter probability is the posterior mass within this many keyframes of it (keyframes, >= 0).");
   }
   void validate() const;  // throws InvalidInput naming the first invalid field
 };

@@ -29,16 +29,11 @@ struct FilterParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("type", p.type, Bounds::oneOf(temporalFilterTypes()),
-      "The temporal filter, one of the sections below, each with the parameters it reads. A saved run is only "
-      "resumed by the filter type that wrote it.");
+      "The temporal filter, exclusive_hypotheses or independent_binary (each a section below), which alone resumes "
+      "a map it saved.");
     v("hubness_min_queries", p.hubness_min_queries, Bounds::in(0, 1000000),
-      "Above 0, the filter judges each keyframe by its saliency minus its hubness: the median saliency it had "
-      "for the queries it was compared with before (filter/keyframe_hubness.hpp), once it has at least this many; "
-      "a keyframe that resembles everything then no longer draws the filter, the candidates and their saliency "
-      "from the keyframe of this place. With ORB at 10 it ranks real frames better (gp_day_a recall@100%P 0.60 to "
-      "0.73) and renders about the same, but it is off by default: it publishes more of an aliased corridor "
-      "above the decision and is less calibrated at night (docs/accuracy.md, \"Hub keyframes\"). A saved run "
-      "is only resumed with the setting that wrote it (on or off). 0 = off.");
+      "Queries a keyframe must have been compared with before the filter judges it by its saliency less its "
+      "hubness, the median saliency it had for them (queries, 0 = off, up to 1,000,000).");
   }
 
   // A filter's section, e.g. section<ExclusiveHypothesisParams>().loop_onset.

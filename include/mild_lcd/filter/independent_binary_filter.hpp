@@ -20,9 +20,9 @@ struct IndependentBinaryParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("loop_persistence", p.loop_persistence, Bounds::probability(),
-      "P(a keyframe's loop continues to the next keyframe).");
+      "P(a keyframe's loop continues to the next keyframe) (probability, 0 to 1).");
     v("no_loop_likelihood", p.no_loop_likelihood, Bounds::above(0),
-      "Likelihood of \"no loop\" against a keyframe's saliency (s - sigma) / mu.");
+      "Likelihood of no loop against a keyframe's saliency (s - sigma) / mu (saliency units, > 0).");
   }
   void validate() const { validateDeclared(*this); }
 };

@@ -32,33 +32,28 @@ struct MihParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_tables", p.num_tables, Bounds::in(SubstringLayout::kMinSubstrings, SubstringLayout::kMaxSubstrings).orZero(),
-      "m: hash tables, one per substring of the descriptor (seed paper: 16 for ORB). 0 = one per 16 bits (16 for "
-      "ORB's 256 bits, 32 for BRISK's 512), so that every table is a directly addressed array of 65,536 buckets.");
+      "m, the hash tables of the index, one per substring of the descriptor (count, 0 = one per 16 bits, else 4 to "
+      "64).");
     v("radius", p.radius, Bounds::in(0, kMaxRadius),
-      "r: multi-probe radius; every bucket within Hamming distance r of the query's substring is probed. r = 1 "
-      "probes 17 buckets per table instead of 1.");
+      "r, the multi-probe radius: every bucket within this Hamming distance of the query's substring is probed "
+      "(bits, 0 to 3).");
     v("cap_buckets", p.cap_buckets, Bounds::any(),
-      "Bucket caps (burstiness, seed paper III.D): a bucket holding more than max(min_bucket_cap, "
-      "bucket_cap_factor * N / 2^substring_bits) entries is discarded (emptied and ignored), where N = "
-      "max(expected_features, features stored).");
-    v("bucket_cap_factor", p.bucket_cap_factor, Bounds::above(0), "The cap's multiple of the average bucket length.");
-    v("expected_features", p.expected_features, Bounds::atLeast(0), "N before the map holds that many features.");
-    v("min_bucket_cap", p.min_bucket_cap, Bounds::atLeast(1), "The cap never goes below this.");
+      "Whether a bucket of more than max(min_bucket_cap, bucket_cap_factor * N / 2^substring_bits) entries, N = "
+      "max(expected_features, features stored), is discarded (true or false).");
+    v("bucket_cap_factor", p.bucket_cap_factor, Bounds::above(0),
+      "The bucket cap as a multiple of the average bucket length (factor, > 0).");
+    v("expected_features", p.expected_features, Bounds::atLeast(0),
+      "N of the bucket cap while the map holds fewer features (features, >= 0).");
+    v("min_bucket_cap", p.min_bucket_cap, Bounds::atLeast(1), "Least bucket cap (entries, >= 1).");
     v("max_bucket_entries", p.max_bucket_entries, Bounds::atLeast(2).orZero(),
-      "Bounded query time for large maps (0 = off): a bucket keeps only its newest max_bucket_entries entries, "
-      "so a query reads at most about m * max_bucket_entries ids per feature however large the map grows; old "
-      "places stay findable through their rare substrings. A bucket at the bound is trimmed instead of discarded "
-      "by the cap above. docs/speed.md, \"Beyond linear growth\", measures recall and time with and without it.");
+      "Entries a bucket keeps, its newest, so that query time stays bounded as the map grows (entries, 0 = "
+      "unbounded, else >= 2).");
     v("max_candidates_per_feature", p.max_candidates_per_feature, Bounds::atLeast(1).orZero(),
-      "Query budget (0 = off): a query feature reads its buckets shortest first, and stops after this many "
-      "entries per 16 tables (scaled by m / 16: 1,024 for BRISK's 32 tables); the last bucket it reaches "
-      "contributes its newest entries. Distinctive substrings, which identify old places, are read whole; the cost "
-      "per query feature stops growing with the map once its common buckets fill. docs/speed.md, \"Query budget\", "
-      "measures recall and time.");
+      "Index entries a query feature reads per 16 tables, shortest buckets first (entries, scaled by m / 16; 0 = "
+      "all, else >= 1).");
     v("inline_prefixes", p.inline_prefixes, Bounds::any(),
-      "Each index entry also holds its feature's first 64 bits, so that early termination reads each bucket "
-      "sequentially instead of one random read per candidate: the same results, 8 bytes more per entry (about 128 "
-      "per stored feature with 16 tables). docs/speed.md measures the trade.");
+      "Whether index entries hold their feature's first 64 bits, so that early termination reads buckets "
+      "sequentially for 8 bytes more per entry (true or false).");
   }
   static constexpr int kAutoSubstringBits = 16;
   // The table count for descriptors of `bits` bits: num_tables, or the automatic choice.

@@ -38,28 +38,24 @@ struct SimilarityParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("max_distance", p.max_distance, Bounds::in(0, 256),
-      "d0: phi(d) = exp(-d^2 / sigma2) for Hamming distance d <= max_distance, else 0. Per 256 bits: scaled by "
-      "bits / 256 for wider descriptors (128 for BRISK). The original MILD values; 48 and 80 measured no better.");
+      "d0, the Hamming distance beyond which a match votes nothing (bits per 256, scaled for other widths; 0 to "
+      "256).");
     v("sigma2", p.sigma2, Bounds::above(0),
-      "sigma^2 of phi, per 256 bits (scaled by the square of bits / 256); 400 and 1600 measured no better.");
+      "sigma^2 of a match's vote phi(d) = exp(-d^2 / sigma2) (squared bits per 256, scaled for other widths; > 0).");
     v("idf_weighting", p.idf_weighting, Bounds::any(),
-      "Inter-image burstiness (seed paper III.D): weight each query feature's votes by log(N / N_f) ...");
+      "Whether each query feature's votes are weighted by log(N / N_f), the seed paper's inter-image burstiness "
+      "(true or false).");
     v("vote_normalization", p.vote_normalization, Bounds::any(),
-      "... and divide them by the feature's total vote mass. Both on is the paper's phi'; both off costs 0.05 "
-      "recall@100%P and 0.024 AP on average over the bench.");
+      "Whether each query feature's votes are divided by its total vote mass, the seed paper's phi' with "
+      "idf_weighting (true or false).");
     v("burstiness_regularizer", p.burstiness_regularizer, Bounds::atLeast(0),
-      "Added to every feature's vote mass: 0.64 is phi of a match 20 bits away (sigma2 900), as the 2017 MILD "
-      "code adds. Without it (0, the paper's formula) a query feature whose only matches are chance ones, far "
-      "away, votes as much as one with a close match. On real frames, full of such features, each query's most "
-      "similar keyframe alone scores recall@100%P / AP 0.02 / 0.38 on gp_day_a and 0.00 / 0.02 at night "
-      "(gp_night_a) without it, 0.58 / 0.70 and 0.03 / 0.08 with it (docs/accuracy.md).");
+      "Added to every query feature's vote mass before its votes are divided by it, so that a feature whose only "
+      "matches are far votes little (vote units, >= 0).");
     v("normalize_by_feature_counts", p.normalize_by_feature_counts, Bounds::any(),
-      "Divide Phi' by |F_query| |F_keyframe| (the paper's Phi' without burstiness weighting).");
+      "Whether Phi' is divided by the product of the query's and the keyframe's feature counts (true or false).");
     v("early_termination_threshold", p.early_termination_threshold, Bounds::in(0, 64),
-      "Early termination: reject a candidate whose distance on its first 64 bits exceeds this, without reading "
-      "the rest. 64 never rejects; values >= max_distance never change a score. Unrelated pairs differ in about "
-      "32 of the first 64 bits, pairs within d0 in about d/4, so 20 rejects nearly every outlier early; "
-      "recall@100%P on the bench is unchanged.");
+      "A stored feature whose distance on the first 64 bits exceeds this is rejected without reading the rest "
+      "(bits, 0 to 64; 64 never rejects).");
   }
   void validate() const { validateDeclared(*this); }
   // The parameters a database of `bits`-bit descriptors runs with (unchanged for 256).

@@ -33,48 +33,33 @@ struct VerificationParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("enabled", p.enabled, Bounds::any(),
-      "Geometric verification of every reported candidate: sparse match (MIH, seed paper IV.B) of query and "
-      "candidate, then a two-view model fitted robustly (verification/method). Candidates that fail it are still "
-      "reported (verified "
-      "= false), with the low probability their few inliers give (scoring/); only verified ones are accepted. "
-      "Its inlier count is the published probability's evidence that means the same on real frames as on "
-      "renders (docs/accuracy.md).");
+      "Whether every reported candidate is verified (sparse match, then a robust two-view fit, "
+      "verification/method), only verified candidates being accepted (true or false).");
     SparseMatchParams::declare(p.matching, v);
     v("method", p.method, Bounds::oneOf(robustMethods()),
-      "Model fit: OpenCV's robust estimator. usac_fast (USAC_FAST: RANSAC with few local-optimisation steps), "
-      "magsac (USAC_MAGSAC, the default before 2026-12), usac (USAC_DEFAULT), usac_prosac (USAC_PROSAC, "
-      "matches ordered by descriptor distance), ransac (classic RANSAC). On the bench's real and public "
-      "sequences usac_fast took 0.79 of magsac's CPU per keyframe with recall@100%P and AP within 0.01 on every "
-      "sequence (docs/speed.md, \"What each stage costs\").");
-    v("ransac_threshold", p.ransac_threshold, Bounds::above(0).runtime(), "Model fit: inlier threshold in pixels.");
-    v("confidence", p.confidence, Bounds::between(0, 1), "Model fit: RANSAC confidence.");
-    v("max_iterations", p.max_iterations, Bounds::atLeast(1), "Model fit: iteration cap.");
+      "Model fit: OpenCV's robust estimator, usac_fast (USAC_FAST), magsac (USAC_MAGSAC), usac (USAC_DEFAULT), "
+      "usac_prosac (USAC_PROSAC) or ransac.");
+    v("ransac_threshold", p.ransac_threshold, Bounds::above(0).runtime(), "Model fit: inlier threshold (pixels, > 0).");
+    v("confidence", p.confidence, Bounds::between(0, 1),
+      "Model fit: RANSAC confidence (probability, above 0 and below 1).");
+    v("max_iterations", p.max_iterations, Bounds::atLeast(1), "Model fit: iteration cap (iterations, >= 1).");
     v("min_inliers", p.min_inliers, Bounds::atLeast(kMinimalMatches).runtime(),
-      "Verified when at least this many matches agree with the model. On the bench 12..20 give the same "
-      "recall@100%P; 15 sits in the middle.");
+      "A candidate is verified when at least this many matches agree with the model (matches, >= 8).");
     v("fx", p.fx, Bounds::any(),
-      "Camera intrinsics in pixels, for keyframes that bring none (a CameraInfo beside the image, "
-      "Keyframe.camera_info take precedence). With fx > 0 the essential matrix is fitted instead of the "
-      "fundamental matrix, and verified loops carry a relative pose.");
+      "Focal length in x for keyframes that bring no intrinsics, with which an essential matrix is fitted and "
+      "verified loops carry a relative pose (pixels, 0 = none).");
     v("fy", p.fy, Bounds::any(), "Focal length in y, in pixels (with fx).");
     v("cx", p.cx, Bounds::any(), "Principal point x, in pixels (with fx).");
     v("cy", p.cy, Bounds::any(), "Principal point y, in pixels (with fx).");
     v("pnp_threshold", p.pnp_threshold, Bounds::above(0).runtime(),
-      "When the query's keypoints have depth (Keyframe.depths), the relative pose of a verified loop is metric, "
-      "from PnP with this inlier threshold in pixels.");
+      "Inlier threshold of the PnP fit that makes a verified loop's relative pose metric when the query's "
+      "keypoints have depth (pixels, > 0).");
     v("parallel_candidates", p.parallel_candidates, Bounds::any(),
-      "Verify one keyframe's candidates concurrently, on OpenCV's worker threads (cv::getNumThreads(): the cores, "
-      "unless the process set fewer). The same results either way; on two cores three candidates take about 0.7 "
-      "of the time, but in the soak at 30 Hz on two cores the node dropped keyframes with it and none without it, "
-      "so it is off by default (docs/speed.md, \"Verification on two cores\").");
+      "Whether one keyframe's candidates are verified concurrently on OpenCV's worker threads, with the same "
+      "results (true or false).");
     v("early_stop", p.early_stop, Bounds::any(),
-      "Fit a candidate's model only when it could matter: after its descriptor matches, a candidate whose "
-      "published probability stays below scoring/decision_probability even if every match were an inlier, and "
-      "below a candidate of the same keyframe already verified, is reported unfitted "
-      "(fit_skipped in mild_offline --details). What is accepted, and each keyframe's best candidate, are the same "
-      "either way; "
-      "the rest of the candidates' probabilities may be lower. Off (false) when fitting the scorer: its "
-      "training data need every candidate's inliers.");
+      "Whether the model fit is skipped for a candidate that could be neither accepted nor its keyframe's best "
+      "even if every match were an inlier (true or false; false to fit the scorer).");
   }
 
   bool usesIntrinsics() const { return fx > 0.0; }

@@ -34,15 +34,13 @@ struct SparseMatchParams {
   template <class Self, class Visit>
   static void declare(Self& p, Visit&& v) {
     v("num_tables", p.num_tables, Bounds::in(SubstringLayout::kMinSubstrings, SubstringLayout::kMaxSubstrings).orZero(),
-      "Sparse match: m tables. 0 = substrings of 12 bits whatever the width (22 tables for ORB, 43 for BRISK). "
-      "The seed paper uses 24 for ORB; on 1,200-feature bench pairs 22 is 1.4x faster and still recovers 97.7% "
-      "of the brute-force pairs closer than 50 bits (24: 99.2%).");
-    v("radius", p.radius, Bounds::in(0, kMaxRadius), "Sparse match: multi-probe radius r.");
+      "Sparse match: m hash tables (count, 0 = substrings of 12 bits, else 4 to 64).");
+    v("radius", p.radius, Bounds::in(0, kMaxRadius), "Sparse match: multi-probe radius r (bits, 0 to 2).");
     v("max_distance", p.max_distance, Bounds::in(0, 256),
-      "Sparse match: matches farther than this (Hamming, per 256 bits: scaled by bits / 256) are dropped.");
+      "Sparse match: matches farther than this are dropped (bits per 256, scaled for other widths; 0 to 256).");
     v("ratio", p.ratio, Bounds::probability().runtime(),
-      "Lowe's ratio test: keep a match only if best < ratio * second best (0 = off).");
-    v("cross_check", p.cross_check, Bounds::any(), "Keep mutual nearest neighbours only.");
+      "Lowe's ratio test: a match is kept only if best < ratio * second best (ratio, 0 to 1; 0 = off).");
+    v("cross_check", p.cross_check, Bounds::any(), "Whether only mutual nearest neighbours are kept (true or false).");
   }
   int tablesFor(int bits) const {
     return num_tables > 0 ? num_tables : SubstringLayout::substringsFor(bits, kAutoSubstringBits);

@@ -85,73 +85,13 @@ class LoopClosureNodelet : public nodelet::Nodelet {
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    // Everything that can be wrong with the configuration is found before any ROS object exists:
-    // a failed start leaves nothing half-built behind for the loader to tear down.
-    try {
-      const RosParameterSource source(pnh);
-      rejectUnknownParameters(source);
-      settings_ = NodeSettings::load(source, defaultDatabaseDir());
-      std::vector<std::string> names = settings_.robotNames();
-      if (names.empty()) names.push_back("");  // one robot: topics and services without a prefix
-      shared_.team = std::make_unique<mild::RobotTeam>(mild::loadDetectorParams(source), names);
-      shared_.failure.assign(names.size(), "");
-      for (size_t r = 0; r < names.size(); ++r) {
-        auto robot = std::make_unique<Robot>();
-        robot->name = names[r];
-        robot->nh = names[r].empty() ? nh : ros::NodeHandle(nh, names[r]);
-        robot->store = std::make_unique<DatabaseStore>(settings_, r, names[r]);
-        robots_.push_back(std::move(robot));
-      }
-      if (settings_.use_image_input) RobotInputs::checkTransport(nh, settings_);
-    } catch (const std::exception& e) {
-      NODELET_FATAL("not starting: %s", e.what());
-      robots_.clear();
-      shared_.team.reset();
-      throw;  // the loader reports the failure; the manager and its other nodelets keep running
-    }
+    configure(nh, pnh);
     team_names_ = settings_.robotNames();  // empty for a node serving one robot
 
     debug_cache_ = std::make_unique<DebugImageCache>(static_cast<size_t>(settings_.debug_image_cache),
                                                      static_cast<size_t>(settings_.debug_image_cache_mb) << 20);
-    KeyframeWorker::Hooks hooks;
-    hooks.startup = [this] {
-      // The team link starts on the maps just loaded, also when one robot's failed (the others'
-      // keyframes go on); a link that cannot start (an unreadable ledger) stays off and never
-      // writes over its ledger.
-      const auto start_team = [this] {
-        if (!team_link_) return;
-        try {
-          team_link_->start();
-        } catch (const std::exception& e) {
-          NODELET_FATAL("the team link (~team/station %s) is off: %s", settings_.team_station.c_str(), e.what());
-        }
-      };
-      try {
-        loadOnStart();
-      } catch (...) {
-        start_team();
-        throw;
-      }
-      start_team();
-    };
-    hooks.publish = [this](const ProcessedKeyframe& k) { publish(k); };
-    hooks.wants_keypoints = [this] { return debug_pub_.getNumSubscribers() > 0; };
-    hooks.warn = [this](const std::string& what) { NODELET_WARN_THROTTLE(2.0, "%s", what.c_str()); };
-    if (!settings_.team_station.empty()) {
-      // The ledger is saved with the maps, and read back only when they are.
-      const std::string ledger =
-          settings_.save_on_shutdown || settings_.load_on_start
-              ? robots_.front()->store->directory() + "/" + settings_.team_station + mild::kTeamLedgerSuffix
-              : "";
-      team_link_ = std::make_unique<TeamLink>(
-          nh, settings_, shared_, shared_.team->names(), ledger,
-          [this](const std::vector<size_t>& robots, const mild_lcd::LoopClosure::ConstPtr& msg) {
-            for (size_t robot : robots) robots_.at(robot)->loop_pub.publish(msg);
-            if (all_pub_) all_pub_.publish(msg);
-          });
-      shared_.on_map_replaced = [this](size_t robot) { team_link_->mapReplaced(robot); };
-      hooks.stored = [this](const mild::DetectionResult& result) { team_link_->stored(result); };
-    }
+    KeyframeWorker::Hooks hooks = workerHooks();
+    if (!settings_.team_station.empty()) createTeamLink(nh, hooks);
     InputLimits limits;
     limits.max_image_pixels = static_cast<uint64_t>(settings_.max_image_pixels);
     limits.max_keyframe_features = static_cast<size_t>(settings_.max_keyframe_features);
@@ -185,6 +125,83 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       robots_[r]->inputs = std::make_unique<RobotInputs>(robots_[r]->nh, pnh, r, settings_, getName(),
                                                          [this](KeyframeInputPtr item) { enqueue(std::move(item)); });
     }
+    logReady();
+  }
+
+  // Everything that can be wrong with the configuration is found before any ROS object exists:
+  // a failed start leaves nothing half-built behind for the loader to tear down.
+  void configure(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
+    try {
+      const RosParameterSource source(pnh);
+      rejectUnknownParameters(source);
+      settings_ = NodeSettings::load(source, defaultDatabaseDir());
+      std::vector<std::string> names = settings_.robotNames();
+      if (names.empty()) names.push_back("");  // one robot: topics and services without a prefix
+      shared_.team = std::make_unique<mild::RobotTeam>(mild::loadDetectorParams(source), names);
+      shared_.failure.assign(names.size(), "");
+      for (size_t r = 0; r < names.size(); ++r) {
+        auto robot = std::make_unique<Robot>();
+        robot->name = names[r];
+        robot->nh = names[r].empty() ? nh : ros::NodeHandle(nh, names[r]);
+        robot->store = std::make_unique<DatabaseStore>(settings_, r, names[r]);
+        robots_.push_back(std::move(robot));
+      }
+      if (settings_.use_image_input) RobotInputs::checkTransport(nh, settings_);
+    } catch (const std::exception& e) {
+      NODELET_FATAL("not starting: %s", e.what());
+      robots_.clear();
+      shared_.team.reset();
+      throw;  // the loader reports the failure; the manager and its other nodelets keep running
+    }
+  }
+
+  // What the worker calls: at start-up, for each answer, to ask whether keypoints are wanted, to warn.
+  KeyframeWorker::Hooks workerHooks() {
+    KeyframeWorker::Hooks hooks;
+    hooks.startup = [this] {
+      // The team link starts on the maps just loaded, also when one robot's failed (the others'
+      // keyframes go on); a link that cannot start (an unreadable ledger) stays off and never
+      // writes over its ledger.
+      const auto start_team = [this] {
+        if (!team_link_) return;
+        try {
+          team_link_->start();
+        } catch (const std::exception& e) {
+          NODELET_FATAL("the team link (~team/station %s) is off: %s", settings_.team_station.c_str(), e.what());
+        }
+      };
+      try {
+        loadOnStart();
+      } catch (...) {
+        start_team();
+        throw;
+      }
+      start_team();
+    };
+    hooks.publish = [this](const ProcessedKeyframe& k) { publish(k); };
+    hooks.wants_keypoints = [this] { return debug_pub_.getNumSubscribers() > 0; };
+    hooks.warn = [this](const std::string& what) { NODELET_WARN_THROTTLE(2.0, "%s", what.c_str()); };
+    return hooks;
+  }
+
+  // With ~team/station: the link to the other stations, told of every keyframe stored and map replaced.
+  void createTeamLink(ros::NodeHandle& nh, KeyframeWorker::Hooks& hooks) {
+    // The ledger is saved with the maps, and read back only when they are.
+    const std::string ledger =
+        settings_.save_on_shutdown || settings_.load_on_start
+            ? robots_.front()->store->directory() + "/" + settings_.team_station + mild::kTeamLedgerSuffix
+            : "";
+    team_link_ = std::make_unique<TeamLink>(
+        nh, settings_, shared_, shared_.team->names(), ledger,
+        [this](const std::vector<size_t>& robots, const mild_lcd::LoopClosure::ConstPtr& msg) {
+          for (size_t robot : robots) robots_.at(robot)->loop_pub.publish(msg);
+          if (all_pub_) all_pub_.publish(msg);
+        });
+    shared_.on_map_replaced = [this](size_t robot) { team_link_->mapReplaced(robot); };
+    hooks.stored = [this](const mild::DetectionResult& result) { team_link_->stored(result); };
+  }
+
+  void logReady() {
     // A copy, under the lock: the worker and the tuning server run already (a retune replaces them).
     const mild::DetectorParams params = [this] {
       const auto lock = shared_.lock();
