@@ -12,6 +12,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <random>
 #include <sstream>
 
@@ -30,6 +31,7 @@
 #include "mild_lcd/detector/detector_parameters.hpp"
 #include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
+#include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/offline/pose_evaluation.hpp"
 #include "offline_plots.hpp"
 
@@ -232,13 +234,17 @@ struct Figures {
   size_t loops = 0, metric = 0;
   double before = 0.0, after = 0.0, after_wrong = 0.0;  // ATE RMSE: odometry, clean graph, graph with wrong loops
   size_t rejected = 0, replaced = 0, wrong_rejected = 0, wrong_kept = 0;
+  // The detector's own wrong loops by the sequence's gt_loops.txt (neither right nor don't-care),
+  // in the clean graph: what the robust loss did with each.
+  bool own_judged = false;
+  size_t own_wrong_rejected = 0, own_wrong_kept = 0;
   std::vector<double> updates;  // both graphs' update times
   mild::tools::TimingSummary timing;
 };
 
 Figures measure(const std::vector<Pose2>& truth, const std::vector<Pose2>& odometry,
                 const std::vector<LoopMeasurement>& loops, const GraphRun& clean, const GraphRun& wrong,
-                size_t replaced) {
+                size_t replaced, const mild::GroundTruth* own_truth) {
   Figures f;
   f.keyframes = truth.size();
   f.replaced = replaced;
@@ -255,6 +261,14 @@ Figures measure(const std::vector<Pose2>& truth, const std::vector<Pose2>& odome
         std::hypot(truth[l.query].x - truth[l.candidate].x, truth[l.query].y - truth[l.candidate].y) > 10.0;
     if (is_wrong) (l.inlier ? f.wrong_kept : f.wrong_rejected) += 1;
   }
+  if (own_truth) {
+    f.own_judged = true;
+    for (const auto& l : clean.loops) {
+      const std::pair<int, int> pair(static_cast<int>(l.query), static_cast<int>(l.candidate));
+      if (own_truth->right.count(pair) || own_truth->dont_care.count(pair)) continue;
+      (l.inlier ? f.own_wrong_kept : f.own_wrong_rejected) += 1;
+    }
+  }
   f.loops = loops.size();
   for (const auto& l : loops) f.metric += l.metric;
   f.length = mild::backend::pathLength(truth);
@@ -269,6 +283,10 @@ void printFigures(const Options& opt, const Figures& f, const std::vector<double
   std::cout << "with " << f.replaced << " of " << f.loops << " loops wrong: ATE " << fixed(f.after_wrong, 3)
             << " m (ratio " << fixed(f.after_wrong / f.before, 3) << "; wrong loops rejected " << f.wrong_rejected
             << ", kept " << f.wrong_kept << ")\n";
+  if (f.own_judged) {
+    std::cout << "the detector's own wrong loops (gt_loops.txt): " << f.own_wrong_rejected + f.own_wrong_kept
+              << ", rejected by the loss " << f.own_wrong_rejected << ", kept " << f.own_wrong_kept << "\n";
+  }
   std::cout << "update time: " << f.updates.size() << " updates, median " << fixed(f.timing.median, 1) << " ms, p95 "
             << fixed(f.timing.p95, 1) << " ms, max " << fixed(f.timing.max, 1) << " ms";
   if (!detector_ms.empty()) {
@@ -292,6 +310,8 @@ void writeJson(const Options& opt, const Figures& f) {
             {"ratio_wrong", f.after_wrong / f.before},
             {"wrong_rejected", f.wrong_rejected},
             {"wrong_kept", f.wrong_kept},
+            {"own_wrong_rejected", f.own_wrong_rejected},
+            {"own_wrong_kept", f.own_wrong_kept},
             {"updates", f.updates.size()},
             {"update_ms", {{"median", f.timing.median}, {"p95", f.timing.p95}, {"max", f.timing.max}}},
             {"drift",
@@ -359,7 +379,11 @@ int run(const Options& opt) {
       withWrongLoops(loops, truth, opt.wrong_fraction, opt.wrong_seed, replaced);
   const GraphRun wrong = runGraph(graph_params, odometry, corrupted);
 
-  const Figures figures = measure(truth, odometry, loops, clean, wrong, replaced);
+  // Loops are keyed by frame index (detectLoops gives each frame its index as id).
+  std::optional<mild::GroundTruth> own_truth;
+  const std::filesystem::path gt = std::filesystem::path(opt.sequence) / "gt_loops.txt";
+  if (std::filesystem::exists(gt)) own_truth = mild::loadGroundTruth(gt.string(), static_cast<long>(n));
+  const Figures figures = measure(truth, odometry, loops, clean, wrong, replaced, own_truth ? &*own_truth : nullptr);
   printFigures(opt, figures, detector_ms);
   if (!opt.json_out.empty()) writeJson(opt, figures);
   if (!opt.trajectories.empty() || !opt.plot.empty()) writeTrajectories(opt, truth, odometry, clean, figures);
