@@ -366,6 +366,29 @@ TEST(LoopDetector, AnotherPlaceIsTakenFromPlacesVerifiedOnPurposeNotFromWhatEarl
   EXPECT_GT(other_places, 0u) << "no candidate had another place that verified";
 }
 
+// A place seen on two earlier passes is one place seen twice, not a place that repeats itself: the
+// second pass's keyframes were found to show the first's when they were stored, so on the third
+// pass neither is the other's "another place", and the third pass is accepted as the second was.
+TEST(LoopDetector, APlaceVisitedTwiceBeforeIsNotAnotherPlace) {
+  const std::vector<cv::Mat>& frames = test::sampleFrames();
+  const size_t pass = 60;  // the start of the sample's corridor, walked three times
+  LoopDetector detector(fixtureParams());
+  size_t accepted[3] = {0, 0, 0}, other_places = 0, third_pass_best = 0;
+  for (size_t k = 0; k < 3 * pass; ++k) {
+    const DetectionResult r = processImage(detector, frames[k % pass], PixelFormat::kGray, 0.5 * k, k);
+    for (const LoopCandidate& c : r.candidates) accepted[k / pass] += c.accepted ? 1 : 0;
+    if (k / pass == 2 && !r.candidates.empty() && r.candidates.front().verification.verified) {
+      ++third_pass_best;
+      other_places += r.candidates.front().other_place_significance > 0.0 ? 1 : 0;
+    }
+  }
+  ASSERT_GT(accepted[1], 20u) << "the second pass closes loops with the first";
+  ASSERT_GT(third_pass_best, 20u);
+  EXPECT_LE(other_places, third_pass_best / 10) << "the first and second passes counted as two places";
+  EXPECT_GE(accepted[2], accepted[1]) << "the third pass lost loops the second closed";
+  EXPECT_EQ(samePlace(detector.map(), 5, 5 + pass, 0), true) << "keyframe 5 + pass was found to show keyframe 5's place";
+}
+
 // A front-end's keyframes can be sparse and a session short: a revisit at the first keyframe that
 // may be a candidate (the query after exclusion_frames others) is reported at that keyframe, with
 // no warm-up: the sample's frame 28, seven keyframes in the middle of the corridor (frames 100 to

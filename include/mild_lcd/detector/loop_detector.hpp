@@ -61,6 +61,14 @@ std::vector<KeyframeIndex> separatedBest(const std::vector<double>& belief, cons
 // its map; the pipeline's parts (scorer, verifier, the candidate parameters) are what retune
 // changes. Images become features before they get here (detector/feature_front_end.hpp).
 // Not thread-safe: callers serialise access.
+// A keyframe stored with a best candidate of its own map at least this probable (and verified) is
+// taken to show that candidate's place (KeyframeRecord::same_place_as): more likely than not.
+constexpr double kSamePlaceProbability = 0.5;
+
+// Whether keyframes a and b of `map` show one place: within `gap` keyframes of each other, or
+// chained within it by what each was found to show when it was stored (KeyframeRecord::same_place_as).
+bool samePlace(const KeyframeMap& map, KeyframeIndex a, KeyframeIndex b, KeyframeIndex gap);
+
 class LoopDetector {
  public:
   explicit LoopDetector(const DetectorParams& params = {});

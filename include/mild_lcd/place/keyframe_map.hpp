@@ -34,6 +34,11 @@ struct KeyframeRecord {
   // (a stored keyframe as a SparseMatch side, a pulled peer's query against it). Saved in a map
   // file (format version 4; a keyframe of an older file is 1) and sent to team peers.
   float detection_scale = 1.0f;
+  // The id of the keyframe this one was found to show when it was stored (its best candidate of
+  // this map, verified and more likely than not a loop), if any: two candidates chained by these
+  // are one place seen twice, not a place that repeats (LoopDetector's another-place input). Kept
+  // while the detector runs; not saved in a map file nor sent to peers.
+  std::optional<uint64_t> same_place_as;
 };
 
 // Everything a map holds, as plain data: what database_file.hpp saves and loads.
@@ -131,6 +136,8 @@ class KeyframeMap {
   TemporalFilter& filter() { return *contents_.filter; }
   // Stores a keyframe whose id was checked (checkId) and whose descriptors fit (checkRoomFor);
   // returns its index. Cannot fail for a checked keyframe.
+  // Records that keyframe k (of this map) shows the place of the keyframe with id `id`.
+  void markSamePlace(KeyframeIndex k, uint64_t id) { contents_.records.at(k).same_place_as = id; }
   KeyframeIndex add(uint64_t id, double stamp, std::vector<cv::KeyPoint> keypoints, const DescriptorList& descriptors,
                     const CameraIntrinsics& camera, float detection_scale = 1.0f);
 

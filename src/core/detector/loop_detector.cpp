@@ -199,6 +199,13 @@ DetectionResult LoopDetector::process(Observation observation, const std::vector
   result.query_session = map_.session();
   result.query_index = map_.add(result.query_id, stamp, std::move(features.keypoints), features.descriptors,
                                 features.camera, features.detection_scale);
+  // The place this keyframe shows, if it was found: a later query that sees both is a revisit of
+  // one place, not a place that repeats (otherPlaceSignificance).
+  for (const LoopCandidate& c : result.candidates) {
+    if (c.robot != robot) continue;  // another robot's map
+    if (c.verification.verified && c.probability >= kSamePlaceProbability) map_.markSamePlace(result.query_index, c.id);
+    break;
+  }
   result.stats.query_ms += msSince(start);
   result.similarity = std::move(own.query.similarity);
   return result;
@@ -240,6 +247,34 @@ void LoopDetector::judge(std::vector<LoopCandidate>& candidates, const Features*
   rankCandidates(candidates, params_.candidates.min_probability);
 }
 
+namespace {
+
+// Keyframe k and the keyframes it was found to show, one after another (KeyframeRecord::same_place_as):
+// a third visit of a place was found to show the second, which showed the first.
+std::vector<KeyframeIndex> placeChain(const KeyframeMap& map, KeyframeIndex k) {
+  constexpr size_t kMostVisits = 16;
+  std::vector<KeyframeIndex> chain{k};
+  while (chain.size() < kMostVisits) {
+    const std::optional<uint64_t> next = map.record(chain.back()).same_place_as;
+    if (!next) break;
+    const std::optional<KeyframeIndex> index = map.find(*next);
+    if (!index || std::find(chain.begin(), chain.end(), *index) != chain.end()) break;
+    chain.push_back(*index);
+  }
+  return chain;
+}
+
+}  // namespace
+
+bool samePlace(const KeyframeMap& map, KeyframeIndex a, KeyframeIndex b, KeyframeIndex gap) {
+  for (KeyframeIndex x : placeChain(map, a)) {
+    for (KeyframeIndex y : placeChain(map, b)) {
+      if ((x > y ? x - y : y - x) <= gap) return true;
+    }
+  }
+  return false;
+}
+
 std::vector<bool> LoopDetector::verifiedOnPurpose(const std::vector<const KeyframeMap*>& maps) const {
   std::vector<bool> on_purpose(maps.size(), false);
   const auto wanted = static_cast<size_t>(params_.scoring.distinct_places);
@@ -260,8 +295,10 @@ double LoopDetector::otherPlaceSignificance(const std::vector<LoopCandidate>& ca
   for (size_t j = 0; j < verifications.size(); ++j) {
     // Another robot's map showing the place too is the place seen twice, not a repetition of it.
     if (j == i || !on_purpose[j] || maps[j] != maps[i]) continue;
-    const KeyframeIndex a = candidates[i].index, b = candidates[j].index;
-    if ((a > b ? a - b : b - a) <= gap) continue;
+    // Another session's keyframe (a map loaded or merged) may show the place again; so may one the
+    // detector found to show it when it was stored.
+    if (candidates[j].session != candidates[i].session) continue;
+    if (samePlace(*maps[i], candidates[i].index, candidates[j].index, gap)) continue;
     most = std::max(most, significanceOf(verifications[j]));
   }
   return most;

@@ -93,7 +93,7 @@ KeyframeIndex KeyframeMap::add(uint64_t id, double stamp, std::vector<cv::KeyPoi
   contents_.database.insert(descriptors);
   const auto index = static_cast<KeyframeIndex>(contents_.records.size());
   contents_.records.push_back(
-      KeyframeRecord{id, stamp, contents_.session, std::move(keypoints), camera, detection_scale});
+      KeyframeRecord{id, stamp, contents_.session, std::move(keypoints), camera, detection_scale, std::nullopt});
   contents_.index_of_id.emplace(id, index);
   contents_.next_id = std::max(contents_.next_id, id + 1);
   contents_.clock.add(stamp);
