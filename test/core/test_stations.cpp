@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <cstdlib>
 #include <iostream>
@@ -210,6 +212,30 @@ TEST(StationLedger, LoopsADeciderCanNoLongerSendAreSkippedAtOnce) {
   ledger.skipLoopsReceivedTo("bravo", 5);
   EXPECT_EQ(ledger.loopsReceivedFrom("bravo"), uint64_t{1} << 62) << "never back";
   EXPECT_EQ(ledger.loopsReceivedFrom("charlie"), 0u);
+}
+
+// The keyframes a peer announced are the only ones its loops may name as candidates, across a
+// restart too (a loop resent after it names a keyframe announced before): kept in the ledger, by
+// robot, session and id (ids repeat across sessions). A ledger written before they were kept reads
+// as one that knows of none.
+TEST(StationLedger, KeepsWhatEachPeerAnnouncedAcrossARestart) {
+  StationLedger ledger("alpha", 1);
+  ledger.announced("bravo", "b1", 0, 45);
+  ledger.announced("bravo", "b2", 1, 45);
+  StationLedger again("alpha", 1);
+  again.fromText(ledger.toText());
+  EXPECT_TRUE(again.wasAnnounced("bravo", "b1", 0, 45));
+  EXPECT_TRUE(again.wasAnnounced("bravo", "b2", 1, 45));
+  EXPECT_FALSE(again.wasAnnounced("bravo", "b1", 1, 45)) << "another session's keyframe 45";
+  EXPECT_FALSE(again.wasAnnounced("bravo", "b2", 0, 45));
+  EXPECT_FALSE(again.wasAnnounced("charlie", "b1", 0, 45)) << "another station's robot of that name";
+  EXPECT_FALSE(again.wasAnnounced("bravo", "b1", 0, 46));
+
+  nlohmann::json older = nlohmann::json::parse(ledger.toText());
+  older.erase("announced");
+  StationLedger from_older("alpha", 1);
+  from_older.fromText(older.dump());
+  EXPECT_FALSE(from_older.wasAnnounced("bravo", "b1", 0, 45));
 }
 
 TEST(RobotTeamRemote, AMapChangedStartsTheRemoteRobotsFiltersOver) {

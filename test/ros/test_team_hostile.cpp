@@ -10,6 +10,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <functional>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <thread>
@@ -268,6 +271,168 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
     EXPECT_LT(last.loops_received[i], 1000u) << "a false claim of lost loops was taken";
     EXPECT_EQ(last.received[i], 0u) << "the summary with a megabyte name was taken";
   }
+}
+
+// Loops the station did not decide are published only as it stored and heard them: from a peer it
+// heard from, for a keyframe it stored (id and session), naming keyframes the peer announced, every
+// value finite and in range, at most detector/max_candidates candidates, `accepted` decided here.
+// Each forged loop below was once published on robot1/loop_closure as sent; now each is refused and
+// counted, and only the one well-formed loop is published, with `accepted` recomputed.
+// (Runs after the tests above: robot1 has stored the sample, mallory has no summary taken.)
+TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  ros::NodeHandle nh;
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  TopicLog<mild_lcd::LoopClosure> published("/robot1/loop_closure", 100000);
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
+  ros::Publisher loop_pub = nh.advertise<mild_lcd::TeamLoop>("/mild_team/alpha/loops", 1000);
+  ros::Publisher summary_pub = nh.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 10);
+  ASSERT_TRUE(statuses.waitForPublisher(30.0));
+  ASSERT_TRUE(published.waitForPublisher(30.0));
+  ASSERT_TRUE(waitForSubscriber(loop_pub, 30.0));
+  ASSERT_TRUE(waitForSubscriber(summary_pub, 30.0));
+  const auto last_status = [&] {
+    mild_lcd::TeamStatus last;
+    for (const auto& s : statuses.messages()) {
+      if (s.station == "alpha") last = s;
+    }
+    return last;
+  };
+  const auto taken_from_mallory = [&] {
+    const mild_lcd::TeamStatus s = last_status();
+    for (size_t i = 0; i < s.peers.size(); ++i) {
+      if (s.peers[i] == "mallory") return s.received[i];
+    }
+    return uint64_t{0};
+  };
+
+  // Mallory, heard from, announces one keyframe: m1's keyframe 7 of session 0.
+  std::atomic<bool> running{true};
+  std::thread heartbeat([&] {
+    while (running) {
+      mild_lcd::TeamStatus s;
+      s.station = "mallory";
+      s.summaries = 1;
+      s.descriptor_bytes = 32;
+      status_pub.publish(s);
+      ros::WallDuration(0.25).sleep();
+    }
+  });
+  mild_lcd::PlaceSummary summary;
+  summary.station = "mallory";
+  summary.seq = 0;
+  summary.robot = "m1";
+  summary.id = 7;
+  summary.features = 500;
+  summary.descriptor_bytes = 32;
+  for (size_t i = 0; i < 32 * 50; ++i) summary.descriptors.push_back(static_cast<uint8_t>((i * 131 + 7) % 251));
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(20.0);
+  while (taken_from_mallory() < 1 && ros::WallTime::now() < end) {
+    summary_pub.publish(summary);
+    ros::WallDuration(0.5).sleep();
+  }
+  ASSERT_EQ(taken_from_mallory(), 1u) << "mallory's well-formed summary was not taken";
+  ros::WallDuration(1.5).sleep();  // a heartbeat of alpha's after it
+  const uint64_t refused_before = last_status().refused;
+
+  // A loop as an honest mallory would send it: robot1's first keyframe (session 0) closes with m1's
+  // keyframe 7, verified; mallory's word on `accepted` (false here) is not taken.
+  const uint64_t query_id = sample.front().id;
+  const auto honest = [&](uint64_t seq) {
+    mild_lcd::TeamLoop l;
+    l.decider = "mallory";
+    l.seq = seq;
+    l.loop.query_station = "alpha";
+    l.loop.query_robot = "robot1";
+    l.loop.query_id = query_id;
+    l.loop.query_session = 0;
+    mild_lcd::LoopCandidate c;
+    c.id = 7;
+    c.session = 0;
+    c.robot = "m1";
+    c.station = "mallory";
+    c.probability = 0.99;
+    c.filter_probability = 0.5;
+    c.similarity = 1.0;
+    c.verified = true;
+    c.accepted = false;
+    c.inliers = 60;
+    c.matches = 100;
+    c.inlier_ratio = 0.6;
+    c.relative_rotation.w = 1.0;
+    l.loop.candidates.push_back(c);
+    return l;
+  };
+  std::vector<std::pair<std::string, mild_lcd::TeamLoop>> forged;
+  {
+    mild_lcd::TeamLoop l = honest(0);
+    l.decider = "eve";  // never heard from
+    forged.emplace_back("from a name never heard from", l);
+  }
+  const auto add = [&](const std::string& what, const std::function<void(mild_lcd::TeamLoop&)>& change) {
+    mild_lcd::TeamLoop l = honest(forged.size() - 1);  // mallory's numbers 0, 1, 2, ...
+    change(l);
+    forged.emplace_back(what, l);
+  };
+  add("probability NaN", [](auto& l) { l.loop.candidates[0].probability = std::nan(""); });
+  add("probability 7", [](auto& l) { l.loop.candidates[0].probability = 7.0; });
+  add("unverified, marked accepted", [](auto& l) {
+    l.loop.candidates[0].verified = false;
+    l.loop.candidates[0].accepted = true;
+  });
+  add("15,000 candidates", [](auto& l) { l.loop.candidates.assign(15000, l.loop.candidates[0]); });
+  add("a keyframe mallory never announced", [](auto& l) { l.loop.candidates[0].id = 8; });
+  add("a keyframe of another session", [](auto& l) { l.loop.candidates[0].session = 1; });
+  add("a query alpha never stored", [](auto& l) { l.loop.query_id = 999999999; });
+  add("the query's session wrong", [](auto& l) { l.loop.query_session = 3; });
+  add("the query as its own candidate", [&](auto& l) {
+    l.loop.candidates[0].station = "alpha";
+    l.loop.candidates[0].robot = "robot1";
+    l.loop.candidates[0].id = query_id;
+  });
+  add("an intra-robot loop 100 m away", [](auto& l) {
+    l.loop.candidates[0].robot = "robot1";
+    l.loop.candidates[0].has_relative_pose = true;
+    l.loop.candidates[0].relative_translation.x = 100.0;
+  });
+  add("an infinite translation", [](auto& l) {
+    l.loop.candidates[0].has_relative_pose = true;
+    l.loop.candidates[0].relative_translation.z = std::numeric_limits<double>::infinity();
+  });
+  for (const auto& [what, l] : forged) {
+    loop_pub.publish(l);
+    ros::WallDuration(0.05).sleep();
+  }
+  const uint64_t honest_seq = forged.size() - 1;
+  loop_pub.publish(honest(honest_seq));
+  const auto from_peers = [&] {
+    std::vector<mild_lcd::LoopClosure> loops;
+    for (const auto& m : published.messages()) {
+      for (const auto& c : m.candidates) {
+        if (c.station != "alpha" && !c.station.empty()) {
+          loops.push_back(m);
+          break;
+        }
+      }
+    }
+    return loops;
+  };
+  const ros::WallTime wait_end = ros::WallTime::now() + ros::WallDuration(15.0);
+  while (from_peers().empty() && ros::WallTime::now() < wait_end) ros::WallDuration(0.1).sleep();
+  ros::WallDuration(2.5).sleep();  // anything else, and alpha's next heartbeats
+  running = false;
+  heartbeat.join();
+
+  const std::vector<mild_lcd::LoopClosure> loops = from_peers();
+  ASSERT_EQ(loops.size(), 1u) << "only the well-formed loop is published";
+  EXPECT_EQ(loops[0].query_id, query_id);
+  EXPECT_EQ(loops[0].query_session, 0u);
+  ASSERT_EQ(loops[0].candidates.size(), 1u);
+  EXPECT_EQ(loops[0].candidates[0].id, 7u);
+  EXPECT_EQ(loops[0].candidates[0].robot, "m1");
+  EXPECT_EQ(loops[0].candidates[0].station, "mallory");
+  EXPECT_TRUE(loops[0].candidates[0].accepted) << "accepted is decided here: verified, 0.99 >= 0.909";
+  EXPECT_GE(last_status().refused, refused_before + forged.size()) << "each forged loop is counted";
 }
 
 }  // namespace

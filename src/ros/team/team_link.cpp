@@ -12,6 +12,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/ros/messages/message_conversions.hpp"
+#include "mild_lcd/ros/team/peer_loop.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -25,6 +26,8 @@ constexpr size_t kMaxMessageBytes = 4u << 20;
 constexpr uint64_t kMaxInboxBytes = 64u << 20;
 constexpr size_t kMaxSummaryDescriptors = 10000;
 constexpr size_t kMaxNameLength = 64;
+// How unknownKeyframeOf's answer begins when a candidate was not announced (yet).
+constexpr const char* kNotAnnounced = "a candidate the decider never announced";
 // Asked again when unanswered this long (a message published before the peer's subscriber
 // connected is lost; the link may have dropped it).
 constexpr std::chrono::seconds kResendAfter{2};
@@ -526,6 +529,8 @@ void TeamLink::take(const std::string& name, const mild_lcd::PlaceSummary::Const
       if (Peer* p = peer(name)) ++p->refused;  // too many remote robots
       return;
     }
+    // A keyframe the peer has (its summary carries descriptors): its loops may name it.
+    ledger_.announced(name, msg->robot, msg->session, msg->id);
     pending.replaced = shared_.replaced;
     asked = pending.answer.needs_features;
   }
@@ -607,6 +612,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     msg = boost::make_shared<mild_lcd::LoopClosure>(loopClosureToMsg(
         result, header, shared_.robot(robots.front()).map().size(), settings_.publish_correspondences, robot_names_));
     msg->query_id = pending.summary->id;
+    msg->query_session = pending.summary->session;  // ids repeat across sessions: the pair names it
     msg->query_robot = pending.summary->robot;
     msg->query_station = pending.peer;
     msg->features = static_cast<int32_t>(pending.summary->features);
@@ -631,44 +637,103 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
   publish_(robots, msg);
 }
 
+// A peer's loop for one of this station's keyframes is published only as this station stored and
+// heard it: its query a keyframe stored here for that robot (id and session), its candidates
+// keyframes the decider announced, its content well formed (peerLoopContentProblem), and
+// `accepted` decided here. A loop refused is counted; when its decider is a peer whose summaries
+// this station took, its number is taken too, so that the decider's later loops are not held
+// behind it (the decider resends a loop until it is counted).
 void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
   const size_t robot = robotIndex(loop->loop.query_robot);
   uint64_t loops_from = 0;
+  bool caught_up = false;  // every summary the decider numbered is taken here
   {
     std::lock_guard<std::mutex> guard(mutex_);
-    Peer* p = peer(loop->decider);  // only a peer's loops are taken: a name is not a ledger entry
-    if (!p || robot >= robot_names_.size() || loop->loop.query_station != settings_.team_station ||
-        bytesOf(*loop) > kMaxMessageBytes) {
-      if (p) {
-        ++p->refused;
+    // Only a peer's loops are taken: a name never heard from makes no peer and no ledger entry.
+    const auto it = peers_.find(loop->decider);
+    if (it == peers_.end() || !it->second.seen || bytesOf(*loop) > kMaxMessageBytes) {
+      if (it != peers_.end()) {
+        ++it->second.refused;
       } else {
         ++refused_;
       }
+      ROS_WARN_STREAM_THROTTLE(10.0, "team link: a loop from '" << loop->decider.substr(0, kMaxNameLength)
+                                                                 << "', not a peer heard from, refused");
       return;
     }
-    loops_from = p->loops_from;
+    loops_from = it->second.loops_from;
+    caught_up = it->second.summaries <= it->second.taken;
   }
+  PeerLoopRules rules;
+  rules.station = settings_.team_station;
+  rules.max_correspondences = static_cast<size_t>(settings_.max_keyframe_features);
+  std::string problem;
   {
     const auto lock = shared_.lock();
-    // In their order only: a later one is dropped and comes again (the decider resends until
-    // acknowledged), an earlier one was published already. A decider that can no longer send the
-    // next one expected (it restarted, or crashed, with loops unacknowledged) is followed: those
-    // loops are lost, and counted.
-    uint64_t expected = ledger_.loopsReceivedFrom(loop->decider);
-    const uint64_t resumes = std::min(loops_from, loop->seq);
-    if (resumes > expected) {
-      {
-        std::lock_guard<std::mutex> guard(mutex_);
-        // (loops_from is below kAbsurdCount: onStatus refuses more.)
-        if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
+    rules.max_candidates = static_cast<size_t>(shared_.team->params().candidates.max_candidates);
+    rules.decision_probability = shared_.team->params().scoring.decision_probability;
+    problem = peerLoopContentProblem(*loop, rules);
+    if (problem.empty()) problem = unknownKeyframeOf(*loop, robot);
+    // A candidate not announced yet, while the decider's summaries are still coming (both stored
+    // at once, or a gap being filled): it is resent until its summary is taken here.
+    if (!problem.empty() && problem.rfind(kNotAnnounced, 0) == 0 && !caught_up) return;
+    // A decider none of whose summaries was taken cannot have decided a loop (its candidates are
+    // its keyframes): nothing of it goes into the ledger.
+    bool in_turn = false;  // the next of its loops expected here
+    bool copy = false;     // one taken already (a resend crossing the acknowledgement)
+    if (ledger_.received(loop->decider) > 0) {
+      // In their order only: a later one is dropped and comes again (the decider resends until
+      // acknowledged), an earlier one was published already. A decider that can no longer send the
+      // next one expected (it restarted, or crashed, with loops unacknowledged) is followed: those
+      // loops are lost, and counted.
+      uint64_t expected = ledger_.loopsReceivedFrom(loop->decider);
+      const uint64_t resumes = std::min(loops_from, loop->seq);
+      if (resumes > expected) {
+        {
+          std::lock_guard<std::mutex> guard(mutex_);
+          // (loops_from is below kAbsurdCount: onStatus refuses more.)
+          if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
+        }
+        ledger_.skipLoopsReceivedTo(loop->decider, resumes);
+        expected = resumes;
       }
-      ledger_.skipLoopsReceivedTo(loop->decider, resumes);
-      expected = resumes;
+      in_turn = loop->seq == expected;
+      copy = loop->seq < expected;
+      if (in_turn) ledger_.tookLoop(loop->decider);
+    } else if (problem.empty()) {
+      problem = kNotAnnounced;
     }
-    if (loop->seq != expected) return;
-    ledger_.tookLoop(loop->decider);
+    if (!problem.empty()) {
+      if (copy) return;
+      std::lock_guard<std::mutex> guard(mutex_);
+      if (Peer* p = peer(loop->decider)) ++p->refused;
+      ROS_WARN_STREAM_THROTTLE(10.0, "team link: a loop from '" << loop->decider << "' refused: " << problem);
+      return;
+    }
+    if (!in_turn) return;
   }
-  publish_({robot}, boost::make_shared<const mild_lcd::LoopClosure>(loop->loop));
+  publish_({robot}, peerLoopAsPublished(*loop, rules));
+}
+
+// Under the detector lock: "" when the loop's query is a keyframe this station stored for that
+// robot (as the decider names it: id and session) and each candidate one the decider announced;
+// else why not.
+std::string TeamLink::unknownKeyframeOf(const mild_lcd::TeamLoop& loop, size_t robot) const {
+  const mild_lcd::LoopClosure& l = loop.loop;
+  if (robot >= robot_names_.size()) return "no robot '" + l.query_robot.substr(0, kMaxNameLength) + "' here";
+  const mild::KeyframeMap& map = shared_.robot(robot).map();
+  const auto index = map.find(l.query_id);
+  if (!index || map.record(*index).session != l.query_session) {
+    return "its query, keyframe " + std::to_string(l.query_id) + " of session " + std::to_string(l.query_session) +
+           ", is not in " + l.query_robot + "'s map";
+  }
+  for (const auto& c : l.candidates) {
+    if (!ledger_.wasAnnounced(loop.decider, c.robot, c.session, c.id)) {
+      return std::string(kNotAnnounced) + ": keyframe " + std::to_string(c.id) + " of session " +
+             std::to_string(c.session) + " of its robot '" + c.robot.substr(0, kMaxNameLength) + "'";
+    }
+  }
+  return "";
 }
 
 size_t TeamLink::robotIndex(const std::string& name) const {

@@ -130,6 +130,7 @@ class TeamLink {
   void serve(const mild_lcd::TeamRequest::ConstPtr& request);
   void onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply);
   void onLoop(const mild_lcd::TeamLoop::ConstPtr& loop);
+  std::string unknownKeyframeOf(const mild_lcd::TeamLoop& loop, size_t robot) const;
   void sendPull(uint64_t request_id, Pending& pending);
 
   void onSummary(const mild_lcd::PlaceSummary::ConstPtr& msg);
