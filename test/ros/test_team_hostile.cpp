@@ -8,10 +8,18 @@
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -29,6 +37,8 @@
 
 namespace mild_lcd::test {
 namespace {
+
+namespace fs = std::filesystem;
 
 std::vector<mild_lcd::Keyframe> sampleKeyframes() {
   rosbag::Bag bag(std::string(MILD_BAG_DIR) + "/sample_robot1.bag");
@@ -433,6 +443,80 @@ TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
   EXPECT_EQ(loops[0].candidates[0].station, "mallory");
   EXPECT_TRUE(loops[0].candidates[0].accepted) << "accepted is decided here: verified, 0.99 >= 0.909";
   EXPECT_GE(last_status().refused, refused_before + forged.size()) << "each forged loop is counted";
+}
+
+// A station node of the test's own (its namespace, its own station name and database folder; the
+// standalone node, so that its pid is the process the test stops).
+pid_t startStation(const std::string& ns, const std::string& station, const std::string& folder) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const std::string ns_arg = "__ns:=" + ns, station_arg = "_team/station:=" + station,
+                      dir_arg = "_database_dir:=" + folder, path_arg = "_database_path:=" + station + ".mild";
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", station_arg.c_str(), dir_arg.c_str(),
+          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+// True when `pid` exited within `timeout_s` of `signal`.
+bool stopStation(pid_t pid, int signal, double timeout_s) {
+  kill(pid, signal);
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  int status = 0;
+  while (ros::WallTime::now() < end) {
+    if (waitpid(pid, &status, WNOHANG) == pid) return true;
+    ros::WallDuration(0.05).sleep();
+  }
+  kill(pid, SIGKILL);
+  waitpid(pid, &status, 0);
+  return false;
+}
+
+// Publishes `count` keyframes on ns/keyframe; true when each was answered within 30 s.
+bool answered(const std::string& ns, size_t count) {
+  ros::NodeHandle nh;
+  ros::Publisher pub = nh.advertise<mild_lcd::Keyframe>(ns + "/keyframe", 100);
+  TopicLog<mild_lcd::LoopClosure> outputs(ns + "/loop_closure");
+  if (!outputs.waitForPublisher(30.0) || !waitForSubscriber(pub, 30.0)) return false;
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  for (size_t i = 0; i < count; ++i) pub.publish(sample[i]);
+  return outputs.waitForCount(count, 30.0);
+}
+
+std::string contentOf(const fs::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// The ledger is written as the maps are (ConfinedFile::replace): a link planted at the name its
+// own writer once wrote through (<station>.team_ledger.json.writing) is never followed, so no file
+// outside the folder is written; a FIFO at the ledger's name is refused at start-up and at the save,
+// without blocking: the station's robot is answered and SIGINT stops it.
+TEST(HostilePeer, LinksAndFifosPlantedBesideTheLedgerNeitherRedirectNorHangIt) {
+  const char* home = std::getenv("ROS_HOME");
+  const fs::path root = fs::path(home && *home ? home : "/tmp") / "mild_team_ledger_test";
+  fs::remove_all(root);
+  const fs::path folder = root / "maps", outside = root / "outside.txt";
+  fs::create_directories(folder);
+  std::ofstream(outside) << "not the ledger's";
+  fs::create_symlink(outside, folder / "bravo.team_ledger.json.writing");
+
+  pid_t node = startStation("/ledger_link", "bravo", folder.string());
+  ASSERT_GT(node, 0);
+  EXPECT_TRUE(answered("/ledger_link", 3));
+  EXPECT_TRUE(stopStation(node, SIGINT, 30.0));
+  EXPECT_EQ(contentOf(outside), "not the ledger's") << "the ledger was written through a planted link";
+  EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(folder / "bravo.team_ledger.json")));
+  EXPECT_NE(contentOf(folder / "bravo.team_ledger.json").find("mild_lcd station ledger"), std::string::npos);
+
+  ASSERT_EQ(mkfifo((folder / "carol.team_ledger.json").c_str(), 0600), 0);
+  node = startStation("/ledger_fifo", "carol", folder.string());
+  ASSERT_GT(node, 0);
+  EXPECT_TRUE(answered("/ledger_fifo", 3)) << "the station hung on the FIFO at its ledger's name";
+  EXPECT_TRUE(stopStation(node, SIGINT, 30.0)) << "SIGINT did not stop the station";
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(folder / "carol.team_ledger.json"))) << "the FIFO was replaced";
+  fs::remove_all(root);
 }
 
 }  // namespace

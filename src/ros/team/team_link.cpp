@@ -1,10 +1,13 @@
 #include "mild_lcd/ros/team/team_link.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <iterator>
-#include <sstream>
+#include <string_view>
 
 #include <ros/serialization.h>
 #include <boost/make_shared.hpp>
@@ -49,6 +52,36 @@ constexpr uint64_t kMaxSummariesSkipped = 1000000;
 // A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
 // most kMaxPeers + 1 of each list), counts and fixed fields.
 constexpr size_t kMaxSummaryOverheadBytes = 16384;
+
+// How every ledger text (StationLedger::toText: a JSON object) begins: ConfinedFile::replace marks
+// its temporary files with it.
+constexpr std::string_view kLedgerSignature = "{\"";
+
+void writeWhole(int fd, const std::string& text) {
+  size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::pwrite(fd, text.data() + done, text.size() - done, static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw mild::IoError("cannot write the station ledger: " + std::string(std::strerror(errno)));
+    done += static_cast<size_t>(n);
+  }
+}
+
+std::string readWhole(const mild::ConfinedFile& file) {
+  unsigned long long size = 0;
+  const int fd = file.openForReading(size);
+  std::string text(size, '\0');
+  size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::read(fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    done += static_cast<size_t>(n);
+  }
+  ::close(fd);
+  if (done != text.size()) throw mild::IoError("cannot read the station ledger " + file.display());
+  return text;
+}
 
 template <class M>
 uint64_t bytesOf(const M& msg) {
@@ -100,15 +133,18 @@ void TeamLink::start() {
   // at a time, and nothing started once stopped (the subscribers and the thread are theirs).
   std::lock_guard<std::mutex> lifecycle(lifecycle_);
   if (stopped_) return;
-  if (!ledger_path_.empty() && settings_.load_on_start && std::filesystem::exists(ledger_path_)) {
-    std::ifstream in(ledger_path_);
-    std::stringstream text;
-    text << in.rdbuf();
-    if (!in) throw mild::IoError("cannot read the station ledger " + ledger_path_);
-    const auto lock = shared_.lock();
-    ledger_.fromText(text.str());
-    for (size_t r = 0; r < robot_names_.size(); ++r) {
-      ledger_.forgetBeyond(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()));
+  if (!ledger_path_.empty() && settings_.load_on_start &&
+      std::filesystem::is_directory(std::filesystem::path(ledger_path_).parent_path())) {
+    // Read as the maps are: a link, a FIFO or a device at its name is refused (never followed, never
+    // waited on), and the link stays off rather than write over it.
+    const mild::ConfinedFile file = mild::fileAtPath(ledger_path_);
+    if (file.exists()) {
+      const std::string text = readWhole(file);
+      const auto lock = shared_.lock();
+      ledger_.fromText(text);
+      for (size_t r = 0; r < robot_names_.size(); ++r) {
+        ledger_.forgetBeyond(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()));
+      }
     }
   }
   {
@@ -178,17 +214,10 @@ void TeamLink::save() {
     const auto lock = shared_.lock();
     text = ledger_.toText();
   }
-  // Written beside, then renamed over: a crash leaves the previous ledger whole.
-  const std::string temporary = ledger_path_ + mild::kTeamLedgerTemporarySuffix;
-  {
-    std::ofstream out(temporary, std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out) throw mild::IoError("cannot write the station ledger " + temporary);
-  }
-  std::error_code error;
-  std::filesystem::rename(temporary, ledger_path_, error);
-  if (error) throw mild::IoError("cannot replace the station ledger " + ledger_path_ + ": " + error.message());
+  // The maps' writer: a temporary file of its own (never through a link planted in the folder),
+  // flushed to disk, renamed over the ledger, which must be a regular file (a link or a FIFO at its
+  // name is refused, never followed or waited on): a crash leaves the previous ledger whole.
+  mild::fileAtPath(ledger_path_).replace([&text](int fd) { writeWhole(fd, text); }, kLedgerSignature);
 }
 
 // --- this station's keyframes ---
