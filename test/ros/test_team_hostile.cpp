@@ -4,7 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <ros/network.h>
 #include <ros/ros.h>
+#include <xmlrpcpp/XmlRpc.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 
@@ -18,6 +20,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <functional>
 #include <iterator>
 #include <limits>
@@ -443,6 +446,79 @@ TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
   EXPECT_EQ(loops[0].candidates[0].station, "mallory");
   EXPECT_TRUE(loops[0].candidates[0].accepted) << "accepted is decided here: verified, 0.99 >= 0.909";
   EXPECT_GE(last_status().refused, refused_before + forged.size()) << "each forged loop is counted";
+}
+
+// The station's process (the nodelet manager "/manager" of team_hostile.test), asked of the node itself.
+pid_t stationPid() {
+  XmlRpc::XmlRpcValue args, result, payload;
+  args[0] = ros::this_node::getName();
+  args[1] = "/manager";
+  if (!ros::master::execute("lookupNode", args, result, payload, true)) return -1;
+  std::string host;
+  uint32_t port = 0;
+  if (!ros::network::splitURI(static_cast<std::string>(payload), host, port)) return -1;
+  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
+  XmlRpc::XmlRpcValue pid_args, pid_result;
+  pid_args[0] = ros::this_node::getName();
+  if (!client.execute("getPid", pid_args, pid_result) || pid_result.size() < 3) return -1;
+  return static_cast<int>(pid_result[2]);
+}
+
+// A line "<key>: <n> kB" of /proc/<pid>/status, in bytes.
+uint64_t procStatusBytes(pid_t pid, const std::string& key) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind(key + ":", 0) == 0) return std::stoull(line.substr(key.size() + 1)) * 1024;
+  }
+  return 0;
+}
+
+uint64_t lastRefused() {
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < end) {
+    for (const auto& s : statuses.messages()) {
+      if (s.station == "alpha") return s.refused;
+    }
+    ros::WallDuration(0.1).sleep();
+  }
+  ADD_FAILURE() << "no heartbeat of alpha's";
+  return 0;
+}
+
+// A message far larger than any of its type a peer sends (a heartbeat of 32 MB: eight million
+// empty station names) is refused before it is deserialised, and counted: the station's peak
+// memory grows by the message's bytes as roscpp reads them (and their copy), not by the
+// 256 MB its names would take as strings.
+TEST(HostilePeer, AnOversizedMessageIsRefusedBeforeItIsDeserialised) {
+  const pid_t station = stationPid();
+  ASSERT_GT(station, 0) << "the station's process was not found";
+  ros::NodeHandle nh;
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 1);
+  ASSERT_TRUE(waitForSubscriber(status_pub, 30.0));
+  const uint64_t refused_before = lastRefused();
+  constexpr size_t kNames = 8u << 20;
+  constexpr uint64_t kMessageBytes = 4 * kNames;  // each empty name is its 4-byte length
+  uint64_t peak_before = 0;
+  {
+    mild_lcd::TeamStatus huge;
+    huge.station = "mallory";
+    huge.descriptor_bytes = 32;
+    huge.peers.resize(kNames);
+    // The peak is measured from here (writing 5 to clear_refs resets it; root only).
+    std::ofstream(("/proc/" + std::to_string(station) + "/clear_refs").c_str()) << "5";
+    peak_before = procStatusBytes(station, "VmHWM");
+    status_pub.publish(huge);
+  }
+  ros::WallDuration(3.0).sleep();
+  const uint64_t refused_after = lastRefused();
+  const uint64_t peak_after = procStatusBytes(station, "VmHWM");
+  const double grown_mb = static_cast<double>(peak_after - peak_before) / (1 << 20);
+  std::cout << "a " << (kMessageBytes >> 20) << " MB heartbeat: the station's peak memory grew by " << grown_mb
+            << " MB\n";
+  RecordProperty("peak_growth_mb_32mb_status", std::to_string(grown_mb));
+  EXPECT_GT(refused_after, refused_before) << "the oversized heartbeat was not counted";
+  EXPECT_LT(peak_after - peak_before, 5 * kMessageBytes / 2) << "the heartbeat was deserialised";
 }
 
 // A station node of the test's own (its namespace, its own station name and database folder; the

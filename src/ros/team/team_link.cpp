@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include <ros/serialization.h>
+#include <topic_tools/shape_shifter.h>
 #include <boost/make_shared.hpp>
 
 #include "mild_lcd/common/errors.hpp"
@@ -52,6 +53,14 @@ constexpr uint64_t kMaxSummariesSkipped = 1000000;
 // A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
 // most kMaxPeers + 1 of each list), counts and fixed fields.
 constexpr size_t kMaxSummaryOverheadBytes = 16384;
+// The largest summary taken: 4 x ~team/summary_bytes of descriptors (give every station the same
+// value) and its names.
+uint64_t maxSummaryBytes(uint64_t summary_bytes) { return 4 * summary_bytes + kMaxSummaryOverheadBytes; }
+// A heartbeat: its station's name, fixed fields, and per peer (at most kMaxPeers of them, and the
+// station itself) a name of at most 32 characters and three counts.
+constexpr uint64_t kMaxStatusBytes = 16384;
+// A request: two names and fixed fields.
+constexpr uint64_t kMaxRequestBytes = 4096;
 
 // How every ledger text (StationLedger::toText: a JSON object) begins: ConfinedFile::replace marks
 // its temporary files with it.
@@ -128,6 +137,43 @@ TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetec
 
 TeamLink::~TeamLink() { stop(); }
 
+// The messages of `name` are taken as bytes (topic_tools::ShapeShifter) and deserialised only when
+// of type M and at most max_bytes: a larger one is refused and counted unread, so that no peer's
+// message is multiplied in memory by deserialising it (a TeamStatus of 240 MB of empty names once
+// took a station to 2.2 GB). roscpp itself still holds a message's bytes until it is handled.
+template <class M>
+ros::Subscriber TeamLink::subscribeBounded(const std::string& name, uint32_t queue, uint64_t max_bytes,
+                                           void (TeamLink::*handle)(const typename M::ConstPtr&)) {
+  const boost::function<void(const topic_tools::ShapeShifter::ConstPtr&)> take =
+      [this, name, max_bytes, handle](const topic_tools::ShapeShifter::ConstPtr& raw) {
+        typename M::ConstPtr msg;
+        if (raw->size() <= max_bytes && raw->getDataType() == ros::message_traits::datatype<M>() &&
+            raw->getMD5Sum() == ros::message_traits::md5sum<M>()) {
+          try {
+            msg = raw->instantiate<M>();
+          } catch (const std::exception&) {
+            msg.reset();  // bytes that are not an M: refused below
+          }
+        }
+        if (!msg) {
+          {
+            std::lock_guard<std::mutex> guard(mutex_);
+            ++refused_;
+            ++refused_unread_;
+          }
+          ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message of " << raw->size() << " bytes of type '"
+                                                                    << raw->getDataType() << "' on " << name
+                                                                    << " refused unread (at most " << max_bytes
+                                                                    << " bytes of " << ros::message_traits::datatype<M>()
+                                                                    << ")");
+          return;
+        }
+        (this->*handle)(msg);
+      };
+  return nh_.subscribe<topic_tools::ShapeShifter>(name, queue, take, ros::VoidConstPtr(),
+                                                  ros::TransportHints().tcpNoDelay());
+}
+
 void TeamLink::start() {
   // start() runs on the worker (after the start-up load) and stop() on the nodelet's shutdown: one
   // at a time, and nothing started once stopped (the subscribers and the thread are theirs).
@@ -157,13 +203,18 @@ void TeamLink::start() {
   const std::string& me = settings_.team_station;
   summaries_pub_ = nh_.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000);
   status_pub_ = nh_.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
-  const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
-  summaries_sub_ = nh_.subscribe("/mild_team/summaries", 1000, &TeamLink::onSummary, this, hints);
-  backfill_sub_ = nh_.subscribe(topic(me, "summaries"), 1000, &TeamLink::onBackfill, this, hints);
-  status_sub_ = nh_.subscribe("/mild_team/status", 100, &TeamLink::onStatus, this, hints);
-  requests_sub_ = nh_.subscribe(topic(me, "requests"), 1000, &TeamLink::onRequest, this, hints);
-  features_sub_ = nh_.subscribe(topic(me, "features"), 100, &TeamLink::onFeaturesMsg, this, hints);
-  loops_sub_ = nh_.subscribe(topic(me, "loops"), 1000, &TeamLink::onLoopMsg, this, hints);
+  // Each message's size is checked before it is deserialised (subscribeBounded).
+  const uint64_t summary_bytes = maxSummaryBytes(static_cast<uint64_t>(settings_.team_summary_bytes));
+  summaries_sub_ = subscribeBounded<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000, summary_bytes,
+                                                            &TeamLink::onSummary);
+  backfill_sub_ =
+      subscribeBounded<mild_lcd::PlaceSummary>(topic(me, "summaries"), 1000, summary_bytes, &TeamLink::onBackfill);
+  status_sub_ = subscribeBounded<mild_lcd::TeamStatus>("/mild_team/status", 100, kMaxStatusBytes, &TeamLink::onStatus);
+  requests_sub_ =
+      subscribeBounded<mild_lcd::TeamRequest>(topic(me, "requests"), 1000, kMaxRequestBytes, &TeamLink::onRequest);
+  features_sub_ = subscribeBounded<mild_lcd::TeamFeatures>(topic(me, "features"), 100, kMaxMessageBytes,
+                                                           &TeamLink::onFeaturesMsg);
+  loops_sub_ = subscribeBounded<mild_lcd::TeamLoop>(topic(me, "loops"), 1000, kMaxMessageBytes, &TeamLink::onLoopMsg);
   thread_ = std::thread([this] { run(); });
   started_ = true;
 }
@@ -363,7 +414,7 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
   };
   const bool well_formed =
       width == static_cast<size_t>(descriptor_bytes_) && bytes <= kMaxMessageBytes &&
-      bytes <= 4 * static_cast<size_t>(settings_.team_summary_bytes) + kMaxSummaryOverheadBytes &&
+      bytes <= maxSummaryBytes(static_cast<uint64_t>(settings_.team_summary_bytes)) &&
       station_names(msg->known_stations) && station_names(msg->unreachable) && msg->descriptors.size() % width == 0 &&
       msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
       msg->descriptors.size() <= 4 * static_cast<size_t>(settings_.team_summary_bytes) &&
@@ -920,6 +971,7 @@ void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   stat.add("summaries sent", summaries_out_);
   stat.add("summary bytes sent", summary_bytes_out_);
   stat.add("refused from no peer", refused_);
+  stat.add("refused unread (oversized, or another type)", refused_unread_);
   if (disconnected > 0) {
     stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu of %zu peers disconnected, %lu summaries behind",
                   disconnected, peers_.size(), static_cast<unsigned long>(backlog_total));

@@ -140,6 +140,9 @@ class TeamLink {
   void onRequest(const mild_lcd::TeamRequest::ConstPtr& msg);
   void onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg);
   void onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg);
+  template <class M>
+  ros::Subscriber subscribeBounded(const std::string& name, uint32_t queue, uint64_t max_bytes,
+                                   void (TeamLink::*handle)(const typename M::ConstPtr&));
   // Into a bounded inbox for the link's thread; a full one refuses (counted).
   template <class Ptr>
   void queue(std::deque<Ptr>& inbox, const Ptr& msg);
@@ -177,6 +180,7 @@ class TeamLink {
   std::map<std::string, uint32_t> remote_sessions_;  // per remote robot: its last summary's session (thread only)
   uint64_t next_request_ = 1;
   uint64_t refused_ = 0;      // from no peer (malformed names, too many peers, full inboxes)
+  uint64_t refused_unread_ = 0;  // of them, refused before deserialising (oversized, or another type)
   uint64_t inbox_bytes_ = 0;  // of requests_, replies_ and loops_
   uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
   // This station's summary numbers skipped this run because peers held them (a restart without the
