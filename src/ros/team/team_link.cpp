@@ -92,6 +92,27 @@ std::string readWhole(const mild::ConfinedFile& file) {
   return text;
 }
 
+// Who a message says sent it: what its MAC binds, and what its failures are counted against.
+const std::string& senderOf(const mild_lcd::PlaceSummary& m) { return m.station; }
+const std::string& senderOf(const mild_lcd::TeamStatus& m) { return m.station; }
+const std::string& senderOf(const mild_lcd::TeamRequest& m) { return m.from; }
+const std::string& senderOf(const mild_lcd::TeamFeatures& m) { return m.from; }
+const std::string& senderOf(const mild_lcd::TeamLoop& m) { return m.decider; }
+
+// What the team key's MAC covers: the topic, then the message as serialised with `mac` empty (its
+// sender, content, numbering and counter).
+template <class M>
+std::vector<uint8_t> macInput(M msg, const std::string& topic) {
+  msg.mac.clear();
+  std::vector<uint8_t> bytes(topic.begin(), topic.end());
+  bytes.push_back(0);
+  const size_t start = bytes.size();
+  bytes.resize(start + ros::serialization::serializationLength(msg));
+  ros::serialization::OStream stream(bytes.data() + start, static_cast<uint32_t>(bytes.size() - start));
+  ros::serialization::serialize(stream, msg);
+  return bytes;
+}
+
 template <class M>
 uint64_t bytesOf(const M& msg) {
   return ros::serialization::serializationLength(msg);
@@ -123,12 +144,19 @@ mild::PlaceSummary coreSummary(const mild_lcd::PlaceSummary& msg) {
 }  // namespace
 
 TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
-                   std::vector<std::string> robot_names, std::string ledger_path, PublishLoop publish)
+                   std::vector<std::string> robot_names, std::string ledger_path, std::string key_file,
+                   PublishLoop publish)
     : nh_(std::move(nh)),
       settings_(settings),
       shared_(shared),
       robot_names_(wireNames(std::move(robot_names), settings.team_station)),
       ledger_path_(std::move(ledger_path)),
+      key_file_(std::move(key_file)),
+      // Above every counter of this station's earlier runs (a run sends far fewer than a message a
+      // nanosecond), so that a restart's messages are not taken for replays.
+      next_counter_(static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                              std::chrono::system_clock::now().time_since_epoch())
+                                              .count())),
       publish_(std::move(publish)),
       ledger_(settings.team_station, robot_names_.size()) {
   descriptor_bytes_ = shared_.team->params().features.descriptorBytes();
@@ -155,6 +183,7 @@ ros::Subscriber TeamLink::subscribeBounded(const std::string& name, uint32_t que
             msg.reset();  // bytes that are not an M: refused below
           }
         }
+        if (msg && !authentic(*msg, name, senderOf(*msg))) return;
         if (!msg) {
           {
             std::lock_guard<std::mutex> guard(mutex_);
@@ -179,6 +208,12 @@ void TeamLink::start() {
   // at a time, and nothing started once stopped (the subscribers and the thread are theirs).
   std::lock_guard<std::mutex> lifecycle(lifecycle_);
   if (stopped_) return;
+  if (!key_file_.empty()) {
+    key_ = mild::TeamKey::fromFile(key_file_);
+  } else {
+    ROS_WARN_STREAM("team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject loops "
+                    "and take this station's numbers (docs/multi_robot.md, \"The team key\")");
+  }
   if (!ledger_path_.empty() && settings_.load_on_start &&
       std::filesystem::is_directory(std::filesystem::path(ledger_path_).parent_path())) {
     // Read as the maps are: a link, a FIFO or a device at its name is refused (never followed, never
@@ -307,7 +342,8 @@ void TeamLink::stored(const mild::DetectionResult& result) {
     ledger_.skipTo(held);
   }
   const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
-  const mild_lcd::PlaceSummary::ConstPtr msg = summaryOf(seq);
+  const mild_lcd::PlaceSummary::Ptr msg = summaryOf(seq);
+  sign(*msg, summaries_pub_.getTopic());
   summaries_pub_.publish(msg);
   std::lock_guard<std::mutex> guard(mutex_);
   ++summaries_out_;
@@ -345,12 +381,50 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
 // A peer's inbox topic before the link's thread has advertised it (shortly after its first sight):
 // what would go there is not sent, as if lost on the way; the protocol sends it again (resends,
 // re-asked gaps and pulls).
-namespace {
 template <class M>
-void publishTo(const ros::Publisher& to, const M& msg) {
-  if (to) to.publish(msg);
+void TeamLink::sign(M& msg, const std::string& topic) {
+  msg.counter = next_counter_++;
+  msg.mac.clear();
+  if (!key_) return;
+  const std::vector<uint8_t> bytes = macInput(msg, topic);
+  const mild::TeamKey::Mac mac = key_->mac(bytes.data(), bytes.size());
+  msg.mac.assign(mac.begin(), mac.end());
 }
-}  // namespace
+
+template <class M>
+void TeamLink::sendTo(const ros::Publisher& to, M& msg) {
+  if (!to) return;
+  sign(msg, to.getTopic());
+  to.publish(msg);
+}
+
+template <class M>
+bool TeamLink::authentic(const M& msg, const std::string& topic, const std::string& sender) {
+  if (!key_) return true;
+  const std::vector<uint8_t> bytes = macInput(msg, topic);
+  bool ok = key_->verify(bytes.data(), bytes.size(), msg.mac.data(), msg.mac.size());
+  std::lock_guard<std::mutex> guard(mutex_);
+  if (ok) {
+    // Each sender's messages on one topic come in its order (one connection): a counter not above
+    // the last taken is a copy sent again. Only key holders make entries here.
+    const std::string stream = sender + " " + topic;
+    const auto last = last_counter_.find(stream);
+    if (last != last_counter_.end() && msg.counter <= last->second) {
+      ok = false;
+    } else if (last != last_counter_.end() || last_counter_.size() < 64 * (kMaxPeers + 1)) {
+      last_counter_[stream] = msg.counter;
+    }
+  }
+  if (!ok) {
+    ++refused_;
+    const bool named = unauthenticated_.count(sender) > 0 || unauthenticated_.size() < kMaxPeers;
+    ++unauthenticated_[named ? sender.substr(0, kMaxNameLength) : std::string()];
+    ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message on " << topic << " claiming to be from '"
+                                                              << sender.substr(0, kMaxNameLength)
+                                                              << "' refused: no valid team key MAC, or a replay");
+  }
+  return ok;
+}
 
 void TeamLink::advertiseNewPeers() {
   std::vector<std::string> names;
@@ -635,7 +709,7 @@ void TeamLink::sendPull(uint64_t request_id, Pending& pending) {
   request.kind = mild_lcd::TeamRequest::FEATURES;
   request.robot = pending.summary->robot;
   request.id = pending.summary->id;
-  publishTo(p->to_requests, request);
+  sendTo(p->to_requests, request);
   p->bytes_out += bytesOf(request);
   pending.asked = Clock::now();
   ++pending.attempts;
@@ -710,7 +784,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
       p->unacknowledged.push_back({loop, Clock::now()});
-      publishTo(p->to_loops, loop);
+      sendTo(p->to_loops, *loop);
       p->bytes_out += bytesOf(*loop);
     }
   }
@@ -840,14 +914,14 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
         busy.request_id = request->request_id;
         busy.status = mild_lcd::TeamFeatures::BUSY;
         busy.reason = "more than ~team/max_requests_per_second requests";
-        publishTo(p->to_features, busy);
+        sendTo(p->to_features, busy);
       }
       return;
     }
     p->tokens -= 1.0;
   }
   if (request->kind == mild_lcd::TeamRequest::SUMMARIES) {
-    std::vector<mild_lcd::PlaceSummary::ConstPtr> batch;
+    std::vector<mild_lcd::PlaceSummary::Ptr> batch;
     {
       const auto lock = shared_.lock();
       const uint64_t end = std::min<uint64_t>(
@@ -857,7 +931,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
     std::lock_guard<std::mutex> guard(mutex_);
     Peer* p = peer(request->from);
     for (const auto& s : batch) {
-      publishTo(p->to_summaries, s);
+      sendTo(p->to_summaries, *s);
       p->bytes_out += bytesOf(*s);
     }
     return;
@@ -887,7 +961,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
   std::lock_guard<std::mutex> guard(mutex_);
   Peer* p = peer(request->from);
   if (reply->status != mild_lcd::TeamFeatures::OK) ++p->refused;
-  publishTo(p->to_features, reply);
+  sendTo(p->to_features, *reply);
   p->bytes_out += bytesOf(*reply);
 }
 
@@ -922,7 +996,7 @@ void TeamLink::tick() {
       request.kind = mild_lcd::TeamRequest::SUMMARIES;
       request.first = p.taken;
       request.count = static_cast<uint32_t>(settings_.team_backfill_batch);
-      publishTo(p.to_requests, request);
+      sendTo(p.to_requests, request);
       p.bytes_out += bytesOf(request);
       p.backfill_asked = now;
     }
@@ -931,7 +1005,9 @@ void TeamLink::tick() {
     for (auto& sent : p.unacknowledged) {
       if (resent == kMaxResendsPerTick) break;
       if (now - sent.at < kResendAfter) continue;
-      publishTo(p.to_loops, sent.loop);
+      // A new counter and MAC: the receiver refuses a copy of the one sent before as a replay.
+      mild_lcd::TeamLoop again = *sent.loop;
+      sendTo(p.to_loops, again);
       p.bytes_out += bytesOf(*sent.loop);
       sent.at = now;
       ++resent;
@@ -942,6 +1018,7 @@ void TeamLink::tick() {
     Peer* p = peer(pending.peer);
     if (p && connected(*p) && now - pending.asked >= kResendAfter) sendPull(id, pending);
   }
+  sign(*status, status_pub_.getTopic());
   status_pub_.publish(status);
 }
 
@@ -972,6 +1049,12 @@ void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   stat.add("summary bytes sent", summary_bytes_out_);
   stat.add("refused from no peer", refused_);
   stat.add("refused unread (oversized, or another type)", refused_unread_);
+  stat.add("team key", key_ ? "yes: messages without its MAC, and replays, are refused"
+                            : "NO: anyone who can publish on /mild_team/ can inject loops (set ~team/key_file)");
+  for (const auto& [claimed, count] : unauthenticated_) {
+    stat.add((claimed.empty() ? std::string("(other names)") : claimed) + ": refused, no valid team key MAC or a replay",
+             count);
+  }
   if (disconnected > 0) {
     stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu of %zu peers disconnected, %lu summaries behind",
                   disconnected, peers_.size(), static_cast<unsigned long>(backlog_total));
