@@ -5,6 +5,13 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
 #include <algorithm>
 #include <cstdlib>
 #include <iostream>
@@ -22,6 +29,7 @@
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/team/place_summary.hpp"
 #include "mild_lcd/team/station_ledger.hpp"
+#include "mild_lcd/team/team_key.hpp"
 #include "sample_halves.hpp"
 #include "test_images.hpp"
 
@@ -210,6 +218,90 @@ TEST(StationLedger, LoopsADeciderCanNoLongerSendAreSkippedAtOnce) {
   ledger.skipLoopsReceivedTo("bravo", 5);
   EXPECT_EQ(ledger.loopsReceivedFrom("bravo"), uint64_t{1} << 62) << "never back";
   EXPECT_EQ(ledger.loopsReceivedFrom("charlie"), 0u);
+}
+
+// The keyframes a peer announced are the only ones its loops may name as candidates, across a
+// restart too (a loop resent after it names a keyframe announced before): kept in the ledger, by
+// robot, session and id (ids repeat across sessions). A ledger written before they were kept reads
+// as one that knows of none.
+TEST(StationLedger, KeepsWhatEachPeerAnnouncedAcrossARestart) {
+  StationLedger ledger("alpha", 1);
+  ledger.announced("bravo", "b1", 0, 45);
+  ledger.announced("bravo", "b2", 1, 45);
+  StationLedger again("alpha", 1);
+  again.fromText(ledger.toText());
+  EXPECT_TRUE(again.wasAnnounced("bravo", "b1", 0, 45));
+  EXPECT_TRUE(again.wasAnnounced("bravo", "b2", 1, 45));
+  EXPECT_FALSE(again.wasAnnounced("bravo", "b1", 1, 45)) << "another session's keyframe 45";
+  EXPECT_FALSE(again.wasAnnounced("bravo", "b2", 0, 45));
+  EXPECT_FALSE(again.wasAnnounced("charlie", "b1", 0, 45)) << "another station's robot of that name";
+  EXPECT_FALSE(again.wasAnnounced("bravo", "b1", 0, 46));
+
+  nlohmann::json older = nlohmann::json::parse(ledger.toText());
+  older.erase("announced");
+  StationLedger from_older("alpha", 1);
+  from_older.fromText(older.dump());
+  EXPECT_FALSE(from_older.wasAnnounced("bravo", "b1", 0, 45));
+}
+
+// The team key's MAC is HMAC-SHA256 (RFC 4231, test case 6: a key longer than SHA-256's block), and
+// a single changed bit of the message or of the MAC fails it.
+TEST(TeamKey, IsHmacSha256AndRefusesAnyChange) {
+  const TeamKey key(std::string(131, '\xaa'));
+  const std::string data = "Test Using Larger Than Block-Size Key - Hash Key First";
+  const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
+  const TeamKey::Mac mac = key.mac(bytes, data.size());
+  std::string hex;
+  for (uint8_t b : mac) {
+    static const char* digits = "0123456789abcdef";
+    hex += digits[b >> 4];
+    hex += digits[b & 15];
+  }
+  EXPECT_EQ(hex, "60e431591ee0b67f0d8a26aacbf5b77f8e0bc6213728c5140546040f0ee37f54");
+  EXPECT_TRUE(key.verify(bytes, data.size(), mac.data(), mac.size()));
+  std::string changed = data;
+  changed[3] ^= 1;
+  EXPECT_FALSE(key.verify(reinterpret_cast<const uint8_t*>(changed.data()), changed.size(), mac.data(), mac.size()));
+  TeamKey::Mac wrong = mac;
+  wrong[31] ^= 1;
+  EXPECT_FALSE(key.verify(bytes, data.size(), wrong.data(), wrong.size()));
+  EXPECT_FALSE(key.verify(bytes, data.size(), mac.data(), 16)) << "a truncated MAC";
+  EXPECT_FALSE(TeamKey(std::string(32, 'b')).verify(bytes, data.size(), mac.data(), mac.size())) << "another key";
+  EXPECT_THROW(TeamKey("short"), InvalidInput);
+}
+
+// The key file must be readable only by its owner, this process's user, and a regular file: a key
+// others can read is no key (refused, saying why), a link or FIFO is never followed or waited on.
+TEST(TeamKey, IsReadOnlyFromAFileOnlyItsOwnerCanRead) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("mild_team_key_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string file = (dir / "team.key").string();
+  std::ofstream(file) << std::string(64, 'f') << "\n";
+  ::chmod(file.c_str(), 0644);
+  EXPECT_THROW(TeamKey::fromFile(file), InvalidInput) << "readable by others";
+  ::chmod(file.c_str(), 0640);
+  EXPECT_THROW(TeamKey::fromFile(file), InvalidInput) << "readable by its group";
+  ::chmod(file.c_str(), 0600);
+  const TeamKey key = TeamKey::fromFile(file);
+  const std::string data = "x";
+  const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
+  const TeamKey::Mac mac = key.mac(bytes, 1);
+  EXPECT_TRUE(TeamKey(std::string(64, 'f')).verify(bytes, 1, mac.data(), mac.size())) << "the trailing newline is not key";
+  if (::geteuid() == 0) {
+    ASSERT_EQ(::chown(file.c_str(), 65534, 65534), 0);
+    EXPECT_THROW(TeamKey::fromFile(file), InvalidInput) << "owned by another user";
+    ASSERT_EQ(::chown(file.c_str(), 0, 0), 0);
+  }
+  std::filesystem::create_symlink(file, dir / "link.key");
+  EXPECT_THROW(TeamKey::fromFile((dir / "link.key").string()), InvalidInput);
+  ASSERT_EQ(::mkfifo((dir / "fifo.key").c_str(), 0600), 0);
+  EXPECT_THROW(TeamKey::fromFile((dir / "fifo.key").string()), InvalidInput);
+  std::ofstream((dir / "short.key").string()) << "0123456789";
+  ::chmod((dir / "short.key").c_str(), 0600);
+  EXPECT_THROW(TeamKey::fromFile((dir / "short.key").string()), InvalidInput);
+  EXPECT_THROW(TeamKey::fromFile((dir / "absent.key").string()), IoError);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(RobotTeamRemote, AMapChangedStartsTheRemoteRobotsFiltersOver) {

@@ -518,6 +518,20 @@ TEST(LaunchFiles, LoadTheNodeletWithoutABondByDefault) {
   }
 }
 
+// A base station whose robots send images (not Keyframe features) is started from its launch
+// file: the station's node then subscribes to each robot's image, over the transport asked for.
+TEST(LaunchFiles, TheBaseStationTakesImagesAsWellAsFeatures) {
+  const std::string launch = "roslaunch --dump-params mild_lcd mild_lcd_base_station.launch station:=alpha robots:=r1";
+  const auto images = mild::test::runCommand(launch + " use_image_input:=true image_transport:=compressed");
+  ASSERT_EQ(images.status, 0) << images.output;
+  EXPECT_NE(images.output.find("/mild_lcd_alpha/use_image_input: true"), std::string::npos) << images.output;
+  EXPECT_NE(images.output.find("/mild_lcd_alpha/image_transport: compressed"), std::string::npos) << images.output;
+  const auto features = mild::test::runCommand(launch);
+  ASSERT_EQ(features.status, 0) << features.output;
+  EXPECT_NE(features.output.find("/mild_lcd_alpha/use_image_input: false"), std::string::npos) << features.output;
+  EXPECT_NE(features.output.find("/mild_lcd_alpha/use_keyframe_input: true"), std::string::npos) << features.output;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Start-up validation: an invalid parameter stops the node with a message naming it.
 

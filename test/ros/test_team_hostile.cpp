@@ -4,12 +4,26 @@
 
 #include <gtest/gtest.h>
 
+#include <ros/network.h>
 #include <ros/ros.h>
+#include <xmlrpcpp/XmlRpc.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <functional>
+#include <iterator>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <thread>
@@ -26,6 +40,8 @@
 
 namespace mild_lcd::test {
 namespace {
+
+namespace fs = std::filesystem;
 
 std::vector<mild_lcd::Keyframe> sampleKeyframes() {
   rosbag::Bag bag(std::string(MILD_BAG_DIR) + "/sample_robot1.bag");
@@ -44,17 +60,18 @@ double percentile(std::vector<double> v, double q) {
 // Publishes keyframes [first, last) on /robot1/keyframe at `rate_hz`, and returns each one's time
 // from publishing to its answer on /robot1/loop_closure, in ms.
 std::vector<double> answerTimes(const std::vector<mild_lcd::Keyframe>& keyframes, size_t first, size_t last,
-                                double rate_hz) {
+                                double rate_hz, const std::string& ns = "/robot1", const std::string& station = "alpha",
+                                const std::string& robot = "robot1") {
   std::mutex mutex;
   std::map<uint64_t, ros::WallTime> sent, answered;
   ros::NodeHandle nh;
   ros::Subscriber sub =
-      nh.subscribe<mild_lcd::LoopClosure>("/robot1/loop_closure", 1000, [&](const mild_lcd::LoopClosure::ConstPtr& m) {
+      nh.subscribe<mild_lcd::LoopClosure>(ns + "/loop_closure", 1000, [&](const mild_lcd::LoopClosure::ConstPtr& m) {
         std::lock_guard<std::mutex> lock(mutex);
-        if (m->query_station == "alpha" && m->query_robot == "robot1")
+        if (m->query_station == station && m->query_robot == robot)
           answered.emplace(m->query_id, ros::WallTime::now());
       });
-  ros::Publisher pub = nh.advertise<mild_lcd::Keyframe>("/robot1/keyframe", 1000);
+  ros::Publisher pub = nh.advertise<mild_lcd::Keyframe>(ns + "/keyframe", 1000);
   EXPECT_TRUE(waitForSubscriber(pub, 30.0));
   while (sub.getNumPublishers() == 0) ros::WallDuration(0.05).sleep();
   for (size_t i = first; i < last; ++i) {
@@ -268,6 +285,453 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
     EXPECT_LT(last.loops_received[i], 1000u) << "a false claim of lost loops was taken";
     EXPECT_EQ(last.received[i], 0u) << "the summary with a megabyte name was taken";
   }
+}
+
+// Loops the station did not decide are published only as it stored and heard them: from a peer it
+// heard from, for a keyframe it stored (id and session), naming keyframes the peer announced, every
+// value finite and in range, at most detector/max_candidates candidates, `accepted` decided here.
+// Each forged loop below was once published on robot1/loop_closure as sent; now each is refused and
+// counted, and only the one well-formed loop is published, with `accepted` recomputed.
+// (Runs after the tests above: robot1 has stored the sample, mallory has no summary taken.)
+TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  ros::NodeHandle nh;
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  TopicLog<mild_lcd::LoopClosure> published("/robot1/loop_closure", 100000);
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
+  ros::Publisher loop_pub = nh.advertise<mild_lcd::TeamLoop>("/mild_team/alpha/loops", 1000);
+  ros::Publisher summary_pub = nh.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 10);
+  ASSERT_TRUE(statuses.waitForPublisher(30.0));
+  ASSERT_TRUE(published.waitForPublisher(30.0));
+  ASSERT_TRUE(waitForSubscriber(loop_pub, 30.0));
+  ASSERT_TRUE(waitForSubscriber(summary_pub, 30.0));
+  const auto last_status = [&] {
+    mild_lcd::TeamStatus last;
+    for (const auto& s : statuses.messages()) {
+      if (s.station == "alpha") last = s;
+    }
+    return last;
+  };
+  const auto taken_from_mallory = [&] {
+    const mild_lcd::TeamStatus s = last_status();
+    for (size_t i = 0; i < s.peers.size(); ++i) {
+      if (s.peers[i] == "mallory") return s.received[i];
+    }
+    return uint64_t{0};
+  };
+
+  // Mallory, heard from, announces one keyframe: m1's keyframe 7 of session 0.
+  std::atomic<bool> running{true};
+  std::thread heartbeat([&] {
+    while (running) {
+      mild_lcd::TeamStatus s;
+      s.station = "mallory";
+      s.summaries = 1;
+      s.descriptor_bytes = 32;
+      status_pub.publish(s);
+      ros::WallDuration(0.25).sleep();
+    }
+  });
+  mild_lcd::PlaceSummary summary;
+  summary.station = "mallory";
+  summary.seq = 0;
+  summary.robot = "m1";
+  summary.id = 7;
+  summary.features = 500;
+  summary.descriptor_bytes = 32;
+  for (size_t i = 0; i < 32 * 50; ++i) summary.descriptors.push_back(static_cast<uint8_t>((i * 131 + 7) % 251));
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(20.0);
+  while (taken_from_mallory() < 1 && ros::WallTime::now() < end) {
+    summary_pub.publish(summary);
+    ros::WallDuration(0.5).sleep();
+  }
+  ASSERT_EQ(taken_from_mallory(), 1u) << "mallory's well-formed summary was not taken";
+  ros::WallDuration(1.5).sleep();  // a heartbeat of alpha's after it
+  const uint64_t refused_before = last_status().refused;
+
+  // A loop as an honest mallory would send it: robot1's first keyframe (session 0) closes with m1's
+  // keyframe 7, verified; mallory's word on `accepted` (false here) is not taken.
+  const uint64_t query_id = sample.front().id;
+  const auto honest = [&](uint64_t seq) {
+    mild_lcd::TeamLoop l;
+    l.decider = "mallory";
+    l.seq = seq;
+    l.loop.query_station = "alpha";
+    l.loop.query_robot = "robot1";
+    l.loop.query_id = query_id;
+    l.loop.query_session = 0;
+    mild_lcd::LoopCandidate c;
+    c.id = 7;
+    c.session = 0;
+    c.robot = "m1";
+    c.station = "mallory";
+    c.probability = 0.99;
+    c.filter_probability = 0.5;
+    c.similarity = 1.0;
+    c.verified = true;
+    c.accepted = false;
+    c.inliers = 60;
+    c.matches = 100;
+    c.inlier_ratio = 0.6;
+    c.relative_rotation.w = 1.0;
+    l.loop.candidates.push_back(c);
+    return l;
+  };
+  std::vector<std::pair<std::string, mild_lcd::TeamLoop>> forged;
+  {
+    mild_lcd::TeamLoop l = honest(0);
+    l.decider = "eve";  // never heard from
+    forged.emplace_back("from a name never heard from", l);
+  }
+  const auto add = [&](const std::string& what, const std::function<void(mild_lcd::TeamLoop&)>& change) {
+    mild_lcd::TeamLoop l = honest(forged.size() - 1);  // mallory's numbers 0, 1, 2, ...
+    change(l);
+    forged.emplace_back(what, l);
+  };
+  add("probability NaN", [](auto& l) { l.loop.candidates[0].probability = std::nan(""); });
+  add("probability 7", [](auto& l) { l.loop.candidates[0].probability = 7.0; });
+  add("unverified, marked accepted", [](auto& l) {
+    l.loop.candidates[0].verified = false;
+    l.loop.candidates[0].accepted = true;
+  });
+  add("15,000 candidates", [](auto& l) { l.loop.candidates.assign(15000, l.loop.candidates[0]); });
+  add("a keyframe mallory never announced", [](auto& l) { l.loop.candidates[0].id = 8; });
+  add("a keyframe of another session", [](auto& l) { l.loop.candidates[0].session = 1; });
+  add("a query alpha never stored", [](auto& l) { l.loop.query_id = 999999999; });
+  add("the query's session wrong", [](auto& l) { l.loop.query_session = 3; });
+  add("the query as its own candidate", [&](auto& l) {
+    l.loop.candidates[0].station = "alpha";
+    l.loop.candidates[0].robot = "robot1";
+    l.loop.candidates[0].id = query_id;
+  });
+  add("an intra-robot loop 100 m away", [](auto& l) {
+    l.loop.candidates[0].robot = "robot1";
+    l.loop.candidates[0].has_relative_pose = true;
+    l.loop.candidates[0].relative_translation.x = 100.0;
+  });
+  add("an infinite translation", [](auto& l) {
+    l.loop.candidates[0].has_relative_pose = true;
+    l.loop.candidates[0].relative_translation.z = std::numeric_limits<double>::infinity();
+  });
+  for (const auto& [what, l] : forged) {
+    loop_pub.publish(l);
+    ros::WallDuration(0.05).sleep();
+  }
+  const uint64_t honest_seq = forged.size() - 1;
+  loop_pub.publish(honest(honest_seq));
+  const auto from_peers = [&] {
+    std::vector<mild_lcd::LoopClosure> loops;
+    for (const auto& m : published.messages()) {
+      for (const auto& c : m.candidates) {
+        if (c.station != "alpha" && !c.station.empty()) {
+          loops.push_back(m);
+          break;
+        }
+      }
+    }
+    return loops;
+  };
+  const ros::WallTime wait_end = ros::WallTime::now() + ros::WallDuration(15.0);
+  while (from_peers().empty() && ros::WallTime::now() < wait_end) ros::WallDuration(0.1).sleep();
+  ros::WallDuration(2.5).sleep();  // anything else, and alpha's next heartbeats
+  running = false;
+  heartbeat.join();
+
+  const std::vector<mild_lcd::LoopClosure> loops = from_peers();
+  ASSERT_EQ(loops.size(), 1u) << "only the well-formed loop is published";
+  EXPECT_EQ(loops[0].query_id, query_id);
+  EXPECT_EQ(loops[0].query_session, 0u);
+  ASSERT_EQ(loops[0].candidates.size(), 1u);
+  EXPECT_EQ(loops[0].candidates[0].id, 7u);
+  EXPECT_EQ(loops[0].candidates[0].robot, "m1");
+  EXPECT_EQ(loops[0].candidates[0].station, "mallory");
+  EXPECT_TRUE(loops[0].candidates[0].accepted) << "accepted is decided here: verified, 0.99 >= 0.909";
+  EXPECT_GE(last_status().refused, refused_before + forged.size()) << "each forged loop is counted";
+}
+
+// The station's process (the nodelet manager "/manager" of team_hostile.test), asked of the node itself.
+pid_t stationPid() {
+  XmlRpc::XmlRpcValue args, result, payload;
+  args[0] = ros::this_node::getName();
+  args[1] = "/manager";
+  if (!ros::master::execute("lookupNode", args, result, payload, true)) return -1;
+  std::string host;
+  uint32_t port = 0;
+  if (!ros::network::splitURI(static_cast<std::string>(payload), host, port)) return -1;
+  XmlRpc::XmlRpcClient client(host.c_str(), static_cast<int>(port), "/");
+  XmlRpc::XmlRpcValue pid_args, pid_result;
+  pid_args[0] = ros::this_node::getName();
+  if (!client.execute("getPid", pid_args, pid_result) || pid_result.size() < 3) return -1;
+  return static_cast<int>(pid_result[2]);
+}
+
+// A line "<key>: <n> kB" of /proc/<pid>/status, in bytes.
+uint64_t procStatusBytes(pid_t pid, const std::string& key) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind(key + ":", 0) == 0) return std::stoull(line.substr(key.size() + 1)) * 1024;
+  }
+  return 0;
+}
+
+uint64_t lastRefused() {
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < end) {
+    for (const auto& s : statuses.messages()) {
+      if (s.station == "alpha") return s.refused;
+    }
+    ros::WallDuration(0.1).sleep();
+  }
+  ADD_FAILURE() << "no heartbeat of alpha's";
+  return 0;
+}
+
+// A message far larger than any of its type a peer sends (a heartbeat of 32 MB: eight million
+// empty station names) is refused before it is deserialised, and counted: the station's peak
+// memory grows by the message's bytes as roscpp reads them (and their copy), not by the
+// 256 MB its names would take as strings.
+TEST(HostilePeer, AnOversizedMessageIsRefusedBeforeItIsDeserialised) {
+  const pid_t station = stationPid();
+  ASSERT_GT(station, 0) << "the station's process was not found";
+  ros::NodeHandle nh;
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 1);
+  ASSERT_TRUE(waitForSubscriber(status_pub, 30.0));
+  const uint64_t refused_before = lastRefused();
+  constexpr size_t kNames = 8u << 20;
+  constexpr uint64_t kMessageBytes = 4 * kNames;  // each empty name is its 4-byte length
+  uint64_t peak_before = 0;
+  {
+    mild_lcd::TeamStatus huge;
+    huge.station = "mallory";
+    huge.descriptor_bytes = 32;
+    huge.peers.resize(kNames);
+    // The peak is measured from here (writing 5 to clear_refs resets it; root only).
+    std::ofstream(("/proc/" + std::to_string(station) + "/clear_refs").c_str()) << "5";
+    peak_before = procStatusBytes(station, "VmHWM");
+    status_pub.publish(huge);
+  }
+  ros::WallDuration(3.0).sleep();
+  const uint64_t refused_after = lastRefused();
+  const uint64_t peak_after = procStatusBytes(station, "VmHWM");
+  const double grown_mb = static_cast<double>(peak_after - peak_before) / (1 << 20);
+  std::cout << "a " << (kMessageBytes >> 20) << " MB heartbeat: the station's peak memory grew by " << grown_mb
+            << " MB\n";
+  RecordProperty("peak_growth_mb_32mb_status", std::to_string(grown_mb));
+  EXPECT_GT(refused_after, refused_before) << "the oversized heartbeat was not counted";
+  EXPECT_LT(peak_after - peak_before, 5 * kMessageBytes / 2) << "the heartbeat was deserialised";
+}
+
+// A station node of the test's own (its namespace, its own station name and database folder; the
+// standalone node, so that its pid is the process the test stops).
+pid_t startStation(const std::string& ns, const std::string& station, const std::string& folder) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const std::string ns_arg = "__ns:=" + ns, station_arg = "_team/station:=" + station,
+                      dir_arg = "_database_dir:=" + folder, path_arg = "_database_path:=" + station + ".mild";
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", station_arg.c_str(), dir_arg.c_str(),
+          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+// True when `pid` exited within `timeout_s` of `signal`.
+bool stopStation(pid_t pid, int signal, double timeout_s) {
+  kill(pid, signal);
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  int status = 0;
+  while (ros::WallTime::now() < end) {
+    if (waitpid(pid, &status, WNOHANG) == pid) return true;
+    ros::WallDuration(0.05).sleep();
+  }
+  kill(pid, SIGKILL);
+  waitpid(pid, &status, 0);
+  return false;
+}
+
+// Publishes `count` keyframes on ns/keyframe; true when each was answered within 30 s.
+bool answered(const std::string& ns, size_t count) {
+  ros::NodeHandle nh;
+  ros::Publisher pub = nh.advertise<mild_lcd::Keyframe>(ns + "/keyframe", 100);
+  TopicLog<mild_lcd::LoopClosure> outputs(ns + "/loop_closure");
+  if (!outputs.waitForPublisher(30.0) || !waitForSubscriber(pub, 30.0)) return false;
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  for (size_t i = 0; i < count; ++i) pub.publish(sample[i]);
+  return outputs.waitForCount(count, 30.0);
+}
+
+std::string contentOf(const fs::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// The ledger is written as the maps are (ConfinedFile::replace): a link planted at the name its
+// own writer once wrote through (<station>.team_ledger.json.writing) is never followed, so no file
+// outside the folder is written; a FIFO at the ledger's name is refused at start-up and at the save,
+// without blocking: the station's robot is answered and SIGINT stops it.
+TEST(HostilePeer, LinksAndFifosPlantedBesideTheLedgerNeitherRedirectNorHangIt) {
+  const char* home = std::getenv("ROS_HOME");
+  const fs::path root = fs::path(home && *home ? home : "/tmp") / "mild_team_ledger_test";
+  fs::remove_all(root);
+  const fs::path folder = root / "maps", outside = root / "outside.txt";
+  fs::create_directories(folder);
+  std::ofstream(outside) << "not the ledger's";
+  fs::create_symlink(outside, folder / "bravo.team_ledger.json.writing");
+
+  pid_t node = startStation("/ledger_link", "bravo", folder.string());
+  ASSERT_GT(node, 0);
+  EXPECT_TRUE(answered("/ledger_link", 3));
+  EXPECT_TRUE(stopStation(node, SIGINT, 30.0));
+  EXPECT_EQ(contentOf(outside), "not the ledger's") << "the ledger was written through a planted link";
+  EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(folder / "bravo.team_ledger.json")));
+  EXPECT_NE(contentOf(folder / "bravo.team_ledger.json").find("mild_lcd station ledger"), std::string::npos);
+
+  ASSERT_EQ(mkfifo((folder / "carol.team_ledger.json").c_str(), 0600), 0);
+  node = startStation("/ledger_fifo", "carol", folder.string());
+  ASSERT_GT(node, 0);
+  EXPECT_TRUE(answered("/ledger_fifo", 3)) << "the station hung on the FIFO at its ledger's name";
+  EXPECT_TRUE(stopStation(node, SIGINT, 30.0)) << "SIGINT did not stop the station";
+  EXPECT_TRUE(fs::is_fifo(fs::symlink_status(folder / "carol.team_ledger.json"))) << "the FIFO was replaced";
+  fs::remove_all(root);
+}
+
+// A station with a team key (~team/key_file) refuses every team message of a publisher without
+// it, and counts it: forged heartbeats, summaries, loops, features and requests from "mallory" are
+// neither taken, published nor answered. Its own robot keeps being answered while 2,000 such
+// messages a second arrive (measured; docs/multi_robot.md reports it).
+TEST(TeamKey, AStationWithAKeyRefusesEveryMessageWithoutIt) {
+  const char* home = std::getenv("ROS_HOME");
+  const fs::path root = fs::path(home && *home ? home : "/tmp") / "mild_team_key_test";
+  fs::remove_all(root);
+  fs::create_directories(root);
+  const std::string key = (root / "team.key").string();
+  std::ofstream(key) << "4f1c2b8e9d0a7e6f5c4b3a29180716253445362718091a2b3c4d5e6f70819203\n";
+  ASSERT_EQ(::chmod(key.c_str(), 0600), 0);
+  const pid_t node = fork();
+  if (node == 0) {
+    const std::string key_arg = "_team/key_file:=" + key;
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/keyed", "__name:=mild_lcd", "_team/station:=kilo", key_arg.c_str(),
+          "_use_image_input:=false", "_queue_size:=300", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  ASSERT_GT(node, 0);
+  ros::NodeHandle nh;
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  TopicLog<mild_lcd::LoopClosure> published("/keyed/loop_closure", 100000);
+  TopicLog<mild_lcd::TeamFeatures> replies("/mild_team/mallory/features");
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 1000);
+  ros::Publisher summary_pub = nh.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000);
+  ros::Publisher loop_pub = nh.advertise<mild_lcd::TeamLoop>("/mild_team/kilo/loops", 1000);
+  ros::Publisher features_pub = nh.advertise<mild_lcd::TeamFeatures>("/mild_team/kilo/features", 1000);
+  ros::Publisher request_pub = nh.advertise<mild_lcd::TeamRequest>("/mild_team/kilo/requests", 1000);
+  ASSERT_TRUE(published.waitForPublisher(30.0));
+  for (ros::Publisher* pub : {&loop_pub, &features_pub, &request_pub}) ASSERT_TRUE(waitForSubscriber(*pub, 30.0));
+  const auto kilo = [&] {
+    mild_lcd::TeamStatus last;
+    for (const auto& st : statuses.messages()) {
+      if (st.station == "kilo") last = st;
+    }
+    return last;
+  };
+  const ros::WallTime heard_by = ros::WallTime::now() + ros::WallDuration(20.0);
+  while (kilo().station.empty() && ros::WallTime::now() < heard_by) ros::WallDuration(0.1).sleep();
+  ASSERT_EQ(kilo().station, "kilo");
+  EXPECT_EQ(kilo().mac.size(), 32u) << "a station with a key authenticates its heartbeat";
+
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  std::vector<mild_lcd::Keyframe> keyframes = sample;
+  const std::vector<double> calm = answerTimes(keyframes, 0, 60, 5.0, "/keyed", "kilo", "");
+  const uint64_t refused_before = kilo().refused;
+
+  // Forged, each without the key: a heartbeat with claims, a well-formed summary, a loop for kilo's
+  // first keyframe, a features reply, a features request; 2,000 messages a second in all.
+  std::atomic<bool> running{true};
+  std::atomic<uint64_t> forged{0};
+  std::thread flood([&] {
+    uint64_t i = 0;
+    while (running) {
+      mild_lcd::TeamStatus st;
+      st.station = "mallory";
+      st.summaries = i + 1;
+      st.descriptor_bytes = 32;
+      st.peers = {"kilo"};
+      st.received = {1000};
+      st.loops_received = {1000};
+      st.loops_from = {0};
+      status_pub.publish(st);
+      mild_lcd::PlaceSummary summary;
+      summary.station = "mallory";
+      summary.seq = i;
+      summary.robot = "m1";
+      summary.id = i;
+      summary.descriptor_bytes = 32;
+      summary.descriptors.assign(32 * 50, static_cast<uint8_t>(i));
+      summary.counter = ~uint64_t{0};
+      summary.mac.assign(32, 0x5A);  // a MAC of the right size, under no key
+      summary_pub.publish(summary);
+      mild_lcd::TeamLoop loop;
+      loop.decider = "mallory";
+      loop.seq = i;
+      loop.loop.query_station = "kilo";
+      loop.loop.query_id = sample.front().id;
+      mild_lcd::LoopCandidate c;
+      c.station = "mallory";
+      c.robot = "m1";
+      c.probability = 1.0;
+      c.verified = true;
+      c.accepted = true;
+      c.relative_rotation.w = 1.0;
+      loop.loop.candidates.push_back(c);
+      loop_pub.publish(loop);
+      mild_lcd::TeamFeatures features;
+      features.from = "mallory";
+      features.request_id = i;
+      features_pub.publish(features);
+      mild_lcd::TeamRequest request;
+      request.from = "mallory";
+      request.request_id = i;
+      request.kind = mild_lcd::TeamRequest::FEATURES;
+      request.id = sample.front().id;
+      request_pub.publish(request);
+      forged += 5;
+      ++i;
+      ros::WallDuration(0.0025).sleep();
+    }
+  });
+  const ros::WallTime flood_start = ros::WallTime::now();
+  const std::vector<double> flooded = answerTimes(keyframes, 60, 120, 5.0, "/keyed", "kilo", "");
+  const double flood_seconds = (ros::WallTime::now() - flood_start).toSec();
+  running = false;
+  flood.join();
+  ros::WallDuration(2.5).sleep();  // kilo's next heartbeats
+
+  const double calm_p50 = percentile(calm, 0.5), flood_p50 = percentile(flooded, 0.5);
+  const double calm_p90 = percentile(calm, 0.9), flood_p90 = percentile(flooded, 0.9);
+  std::cout << "keyed station's own robot: median " << calm_p50 << " ms, p90 " << calm_p90 << " ms without; "
+            << flood_p50 << " / " << flood_p90 << " ms under " << forged / flood_seconds
+            << " forged messages a second\n";
+  RecordProperty("keyed_answer_ms_p50_calm", std::to_string(calm_p50));
+  RecordProperty("keyed_answer_ms_p50_flooded", std::to_string(flood_p50));
+  RecordProperty("keyed_forged_per_second", std::to_string(forged / flood_seconds));
+  EXPECT_EQ(calm.size(), 60u);
+  EXPECT_EQ(flooded.size(), 60u);
+  EXPECT_GE(forged / flood_seconds, 1500.0) << "the flood was slower than meant";
+  // As loose as the unkeyed flood's bound (IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot): on
+  // two cores shared with the flooding process the median grows 2.2-2.4 times (docs/multi_robot.md).
+  EXPECT_LE(flood_p50, 3.0 * calm_p50 + 50.0) << "the forged flood stalled the station's own robot";
+
+  const mild_lcd::TeamStatus last = kilo();
+  EXPECT_GE(last.refused - refused_before, forged / 2) << "the forged messages were not counted";
+  EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "mallory"), 0) << "mallory was taken for a peer";
+  for (const auto& m : published.messages()) {
+    for (const auto& c : m.candidates) EXPECT_NE(c.station, "mallory") << "a forged loop was published";
+  }
+  for (const auto& r : replies.messages()) EXPECT_NE(r.from, "kilo") << "a forged request was answered";
+  kill(node, SIGINT);
+  int status = 0;
+  waitpid(node, &status, 0);
+  fs::remove_all(root);
 }
 
 }  // namespace

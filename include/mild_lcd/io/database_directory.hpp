@@ -58,8 +58,9 @@ class ConfinedFile {
 bool isTemporaryFileName(const std::string& name);
 
 // What a station of a team across hosts saves beside its maps: "<station>" + kTeamLedgerSuffix,
-// written through that name + kTeamLedgerTemporarySuffix. No client-named path may use either, as
-// a file or as a folder (a folder by the temporary name once stopped every later save of the ledger).
+// replaced as a map is (ConfinedFile::replace). No client-named path may use that name or that name
+// + kTeamLedgerTemporarySuffix, as a file or as a folder: a client must not make or replace a
+// station's ledger.
 constexpr const char* kTeamLedgerSuffix = ".team_ledger.json";
 constexpr const char* kTeamLedgerTemporarySuffix = ".writing";
 bool isTeamLedgerName(const std::string& name);

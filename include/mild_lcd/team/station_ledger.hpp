@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -59,6 +60,12 @@ class StationLedger {
   // Counts one more of peer's summaries taken (the one numbered received(peer)).
   void took(const std::string& peer);
   std::vector<std::string> peers() const;
+
+  // A keyframe a peer announced: robot's keyframe `id` of `session` at station `peer`, from a summary
+  // taken from it. A loop that peer decides for this station may name only such keyframes as its
+  // candidates (they are the peer's own, and it summarises every one it stores).
+  void announced(const std::string& peer, const std::string& robot, uint32_t session, uint64_t id);
+  bool wasAnnounced(const std::string& peer, const std::string& robot, uint32_t session, uint64_t id) const;
 
   // How many of robot's map keyframes (of `map_size`) a summary from another station may find as
   // candidates at this station: a prefix of the map. Keyframes stored before the station kept a
@@ -105,6 +112,8 @@ class StationLedger {
   std::map<std::string, uint64_t> received_;        // per peer
   std::map<std::string, uint64_t> loops_sent_;      // per peer
   std::map<std::string, uint64_t> loops_received_;  // per peer
+  using KeyframeKeys = std::set<std::pair<uint32_t, uint64_t>>;                   // (session, id)
+  std::map<std::string, std::map<std::string, KeyframeKeys>> announced_;  // per peer, per robot of it
 };
 
 }  // namespace mild

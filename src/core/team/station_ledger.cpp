@@ -64,6 +64,18 @@ uint64_t StationLedger::knownOf(uint64_t seq, const std::string& peer) const {
   return 0;
 }
 
+void StationLedger::announced(const std::string& peer, const std::string& robot, uint32_t session, uint64_t id) {
+  announced_[peer][robot].emplace(session, id);
+}
+
+bool StationLedger::wasAnnounced(const std::string& peer, const std::string& robot, uint32_t session,
+                                 uint64_t id) const {
+  const auto of_peer = announced_.find(peer);
+  if (of_peer == announced_.end()) return false;
+  const auto of_robot = of_peer->second.find(robot);
+  return of_robot != of_peer->second.end() && of_robot->second.count({session, id}) > 0;
+}
+
 KeyframeIndex StationLedger::eligiblePrefix(size_t robot, KeyframeIndex map_size, const PlaceSummary& summary) const {
   if (robot >= robots_) throw InvalidInput("no robot " + std::to_string(robot));
   const std::vector<Numbered>& numbered = numbered_[robot];
@@ -147,6 +159,7 @@ std::string StationLedger::toText() const {
   j["received"] = received_;
   j["loops_sent"] = loops_sent_;
   j["loops_received"] = loops_received_;
+  j["announced"] = announced_;
   return j.dump();
 }
 
@@ -185,11 +198,16 @@ void StationLedger::fromText(const std::string& text) {
     auto received = j.at("received").get<std::map<std::string, uint64_t>>();
     auto loops_sent = j.at("loops_sent").get<std::map<std::string, uint64_t>>();
     auto loops_received = j.at("loops_received").get<std::map<std::string, uint64_t>>();
+    // Absent from ledgers written before peers' announcements were kept: then none are known, and
+    // a peer's loop naming a keyframe it announced before is refused (counted).
+    std::map<std::string, std::map<std::string, KeyframeKeys>> announced;
+    if (j.contains("announced")) announced = j.at("announced").get<decltype(announced)>();
     own_ = std::move(own);
     numbered_ = std::move(numbered);
     received_ = std::move(received);
     loops_sent_ = std::move(loops_sent);
     loops_received_ = std::move(loops_received);
+    announced_ = std::move(announced);
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(std::string("the station ledger is malformed: ") + e.what());
   }

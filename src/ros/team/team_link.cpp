@@ -1,17 +1,22 @@
 #include "mild_lcd/ros/team/team_link.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <iterator>
-#include <sstream>
+#include <string_view>
 
 #include <ros/serialization.h>
+#include <topic_tools/shape_shifter.h>
 #include <boost/make_shared.hpp>
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/ros/messages/message_conversions.hpp"
+#include "mild_lcd/ros/team/peer_loop.hpp"
 
 namespace mild_lcd {
 namespace {
@@ -25,6 +30,8 @@ constexpr size_t kMaxMessageBytes = 4u << 20;
 constexpr uint64_t kMaxInboxBytes = 64u << 20;
 constexpr size_t kMaxSummaryDescriptors = 10000;
 constexpr size_t kMaxNameLength = 64;
+// How unknownKeyframeOf's answer begins when a candidate was not announced (yet).
+constexpr const char* kNotAnnounced = "a candidate the decider never announced";
 // Asked again when unanswered this long (a message published before the peer's subscriber
 // connected is lost; the link may have dropped it).
 constexpr std::chrono::seconds kResendAfter{2};
@@ -46,6 +53,65 @@ constexpr uint64_t kMaxSummariesSkipped = 1000000;
 // A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
 // most kMaxPeers + 1 of each list), counts and fixed fields.
 constexpr size_t kMaxSummaryOverheadBytes = 16384;
+// The largest summary taken: 4 x ~team/summary_bytes of descriptors (give every station the same
+// value) and its names.
+uint64_t maxSummaryBytes(uint64_t summary_bytes) { return 4 * summary_bytes + kMaxSummaryOverheadBytes; }
+// A heartbeat: its station's name, fixed fields, and per peer (at most kMaxPeers of them, and the
+// station itself) a name of at most 32 characters and three counts.
+constexpr uint64_t kMaxStatusBytes = 16384;
+// A request: two names and fixed fields.
+constexpr uint64_t kMaxRequestBytes = 4096;
+
+// How every ledger text (StationLedger::toText: a JSON object) begins: ConfinedFile::replace marks
+// its temporary files with it.
+constexpr std::string_view kLedgerSignature = "{\"";
+
+void writeWhole(int fd, const std::string& text) {
+  size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::pwrite(fd, text.data() + done, text.size() - done, static_cast<off_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw mild::IoError("cannot write the station ledger: " + std::string(std::strerror(errno)));
+    done += static_cast<size_t>(n);
+  }
+}
+
+std::string readWhole(const mild::ConfinedFile& file) {
+  unsigned long long size = 0;
+  const int fd = file.openForReading(size);
+  std::string text(size, '\0');
+  size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::read(fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    done += static_cast<size_t>(n);
+  }
+  ::close(fd);
+  if (done != text.size()) throw mild::IoError("cannot read the station ledger " + file.display());
+  return text;
+}
+
+// Who a message says sent it: what its MAC binds, and what its failures are counted against.
+const std::string& senderOf(const mild_lcd::PlaceSummary& m) { return m.station; }
+const std::string& senderOf(const mild_lcd::TeamStatus& m) { return m.station; }
+const std::string& senderOf(const mild_lcd::TeamRequest& m) { return m.from; }
+const std::string& senderOf(const mild_lcd::TeamFeatures& m) { return m.from; }
+const std::string& senderOf(const mild_lcd::TeamLoop& m) { return m.decider; }
+
+// What the team key's MAC covers: the topic, then the message as serialised with `mac` empty (its
+// sender, content, numbering and counter).
+template <class M>
+std::vector<uint8_t> macInput(M msg, const std::string& topic) {
+  msg.mac.clear();
+  std::vector<uint8_t> bytes(topic.begin(), topic.end());
+  bytes.push_back(0);
+  const size_t start = bytes.size();
+  bytes.resize(start + ros::serialization::serializationLength(msg));
+  ros::serialization::OStream stream(bytes.data() + start, static_cast<uint32_t>(bytes.size() - start));
+  ros::serialization::serialize(stream, msg);
+  return bytes;
+}
 
 template <class M>
 uint64_t bytesOf(const M& msg) {
@@ -78,12 +144,19 @@ mild::PlaceSummary coreSummary(const mild_lcd::PlaceSummary& msg) {
 }  // namespace
 
 TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
-                   std::vector<std::string> robot_names, std::string ledger_path, PublishLoop publish)
+                   std::vector<std::string> robot_names, std::string ledger_path, std::string key_file,
+                   PublishLoop publish)
     : nh_(std::move(nh)),
       settings_(settings),
       shared_(shared),
       robot_names_(wireNames(std::move(robot_names), settings.team_station)),
       ledger_path_(std::move(ledger_path)),
+      key_file_(std::move(key_file)),
+      // Above every counter of this station's earlier runs (a run sends far fewer than a message a
+      // nanosecond), so that a restart's messages are not taken for replays.
+      next_counter_(static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                              std::chrono::system_clock::now().time_since_epoch())
+                                              .count())),
       publish_(std::move(publish)),
       ledger_(settings.team_station, robot_names_.size()) {
   descriptor_bytes_ = shared_.team->params().features.descriptorBytes();
@@ -92,20 +165,67 @@ TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetec
 
 TeamLink::~TeamLink() { stop(); }
 
+// The messages of `name` are taken as bytes (topic_tools::ShapeShifter) and deserialised only when
+// of type M and at most max_bytes: a larger one is refused and counted unread, so that no peer's
+// message is multiplied in memory by deserialising it (a TeamStatus of 240 MB of empty names once
+// took a station to 2.2 GB). roscpp itself still holds a message's bytes until it is handled.
+template <class M>
+ros::Subscriber TeamLink::subscribeBounded(const std::string& name, uint32_t queue, uint64_t max_bytes,
+                                           void (TeamLink::*handle)(const typename M::ConstPtr&)) {
+  const boost::function<void(const topic_tools::ShapeShifter::ConstPtr&)> take =
+      [this, name, max_bytes, handle](const topic_tools::ShapeShifter::ConstPtr& raw) {
+        typename M::ConstPtr msg;
+        if (raw->size() <= max_bytes && raw->getDataType() == ros::message_traits::datatype<M>() &&
+            raw->getMD5Sum() == ros::message_traits::md5sum<M>()) {
+          try {
+            msg = raw->instantiate<M>();
+          } catch (const std::exception&) {
+            msg.reset();  // bytes that are not an M: refused below
+          }
+        }
+        if (msg && !authentic(*msg, name, senderOf(*msg))) return;
+        if (!msg) {
+          {
+            std::lock_guard<std::mutex> guard(mutex_);
+            ++refused_;
+            ++refused_unread_;
+          }
+          ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message of " << raw->size() << " bytes of type '"
+                                                                    << raw->getDataType() << "' on " << name
+                                                                    << " refused unread (at most " << max_bytes
+                                                                    << " bytes of " << ros::message_traits::datatype<M>()
+                                                                    << ")");
+          return;
+        }
+        (this->*handle)(msg);
+      };
+  return nh_.subscribe<topic_tools::ShapeShifter>(name, queue, take, ros::VoidConstPtr(),
+                                                  ros::TransportHints().tcpNoDelay());
+}
+
 void TeamLink::start() {
   // start() runs on the worker (after the start-up load) and stop() on the nodelet's shutdown: one
   // at a time, and nothing started once stopped (the subscribers and the thread are theirs).
   std::lock_guard<std::mutex> lifecycle(lifecycle_);
   if (stopped_) return;
-  if (!ledger_path_.empty() && settings_.load_on_start && std::filesystem::exists(ledger_path_)) {
-    std::ifstream in(ledger_path_);
-    std::stringstream text;
-    text << in.rdbuf();
-    if (!in) throw mild::IoError("cannot read the station ledger " + ledger_path_);
-    const auto lock = shared_.lock();
-    ledger_.fromText(text.str());
-    for (size_t r = 0; r < robot_names_.size(); ++r) {
-      ledger_.forgetBeyond(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()));
+  if (!key_file_.empty()) {
+    key_ = mild::TeamKey::fromFile(key_file_);
+  } else {
+    ROS_WARN_STREAM("team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject loops "
+                    "and take this station's numbers (docs/multi_robot.md, \"The team key\")");
+  }
+  if (!ledger_path_.empty() && settings_.load_on_start &&
+      std::filesystem::is_directory(std::filesystem::path(ledger_path_).parent_path())) {
+    // Read as the maps are: a link, a FIFO or a device at its name is refused (never followed, never
+    // waited on), and the link stays off rather than write over it.
+    const mild::ConfinedFile file = mild::fileAtPath(ledger_path_);
+    if (file.exists()) {
+      const std::string text = readWhole(file);
+      const auto lock = shared_.lock();
+      ledger_.fromText(text);
+      for (size_t r = 0; r < robot_names_.size(); ++r) {
+        ledger_.forgetBeyond(r, static_cast<mild::KeyframeIndex>(shared_.robot(r).map().size()));
+      }
     }
   }
   {
@@ -118,13 +238,18 @@ void TeamLink::start() {
   const std::string& me = settings_.team_station;
   summaries_pub_ = nh_.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000);
   status_pub_ = nh_.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
-  const ros::TransportHints hints = ros::TransportHints().tcpNoDelay();
-  summaries_sub_ = nh_.subscribe("/mild_team/summaries", 1000, &TeamLink::onSummary, this, hints);
-  backfill_sub_ = nh_.subscribe(topic(me, "summaries"), 1000, &TeamLink::onBackfill, this, hints);
-  status_sub_ = nh_.subscribe("/mild_team/status", 100, &TeamLink::onStatus, this, hints);
-  requests_sub_ = nh_.subscribe(topic(me, "requests"), 1000, &TeamLink::onRequest, this, hints);
-  features_sub_ = nh_.subscribe(topic(me, "features"), 100, &TeamLink::onFeaturesMsg, this, hints);
-  loops_sub_ = nh_.subscribe(topic(me, "loops"), 1000, &TeamLink::onLoopMsg, this, hints);
+  // Each message's size is checked before it is deserialised (subscribeBounded).
+  const uint64_t summary_bytes = maxSummaryBytes(static_cast<uint64_t>(settings_.team_summary_bytes));
+  summaries_sub_ = subscribeBounded<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000, summary_bytes,
+                                                            &TeamLink::onSummary);
+  backfill_sub_ =
+      subscribeBounded<mild_lcd::PlaceSummary>(topic(me, "summaries"), 1000, summary_bytes, &TeamLink::onBackfill);
+  status_sub_ = subscribeBounded<mild_lcd::TeamStatus>("/mild_team/status", 100, kMaxStatusBytes, &TeamLink::onStatus);
+  requests_sub_ =
+      subscribeBounded<mild_lcd::TeamRequest>(topic(me, "requests"), 1000, kMaxRequestBytes, &TeamLink::onRequest);
+  features_sub_ = subscribeBounded<mild_lcd::TeamFeatures>(topic(me, "features"), 100, kMaxMessageBytes,
+                                                           &TeamLink::onFeaturesMsg);
+  loops_sub_ = subscribeBounded<mild_lcd::TeamLoop>(topic(me, "loops"), 1000, kMaxMessageBytes, &TeamLink::onLoopMsg);
   thread_ = std::thread([this] { run(); });
   started_ = true;
 }
@@ -175,17 +300,10 @@ void TeamLink::save() {
     const auto lock = shared_.lock();
     text = ledger_.toText();
   }
-  // Written beside, then renamed over: a crash leaves the previous ledger whole.
-  const std::string temporary = ledger_path_ + mild::kTeamLedgerTemporarySuffix;
-  {
-    std::ofstream out(temporary, std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out) throw mild::IoError("cannot write the station ledger " + temporary);
-  }
-  std::error_code error;
-  std::filesystem::rename(temporary, ledger_path_, error);
-  if (error) throw mild::IoError("cannot replace the station ledger " + ledger_path_ + ": " + error.message());
+  // The maps' writer: a temporary file of its own (never through a link planted in the folder),
+  // flushed to disk, renamed over the ledger, which must be a regular file (a link or a FIFO at its
+  // name is refused, never followed or waited on): a crash leaves the previous ledger whole.
+  mild::fileAtPath(ledger_path_).replace([&text](int fd) { writeWhole(fd, text); }, kLedgerSignature);
 }
 
 // --- this station's keyframes ---
@@ -224,7 +342,8 @@ void TeamLink::stored(const mild::DetectionResult& result) {
     ledger_.skipTo(held);
   }
   const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
-  const mild_lcd::PlaceSummary::ConstPtr msg = summaryOf(seq);
+  const mild_lcd::PlaceSummary::Ptr msg = summaryOf(seq);
+  sign(*msg, summaries_pub_.getTopic());
   summaries_pub_.publish(msg);
   std::lock_guard<std::mutex> guard(mutex_);
   ++summaries_out_;
@@ -262,12 +381,50 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
 // A peer's inbox topic before the link's thread has advertised it (shortly after its first sight):
 // what would go there is not sent, as if lost on the way; the protocol sends it again (resends,
 // re-asked gaps and pulls).
-namespace {
 template <class M>
-void publishTo(const ros::Publisher& to, const M& msg) {
-  if (to) to.publish(msg);
+void TeamLink::sign(M& msg, const std::string& topic) {
+  msg.counter = next_counter_++;
+  msg.mac.clear();
+  if (!key_) return;
+  const std::vector<uint8_t> bytes = macInput(msg, topic);
+  const mild::TeamKey::Mac mac = key_->mac(bytes.data(), bytes.size());
+  msg.mac.assign(mac.begin(), mac.end());
 }
-}  // namespace
+
+template <class M>
+void TeamLink::sendTo(const ros::Publisher& to, M& msg) {
+  if (!to) return;
+  sign(msg, to.getTopic());
+  to.publish(msg);
+}
+
+template <class M>
+bool TeamLink::authentic(const M& msg, const std::string& topic, const std::string& sender) {
+  if (!key_) return true;
+  const std::vector<uint8_t> bytes = macInput(msg, topic);
+  bool ok = key_->verify(bytes.data(), bytes.size(), msg.mac.data(), msg.mac.size());
+  std::lock_guard<std::mutex> guard(mutex_);
+  if (ok) {
+    // Each sender's messages on one topic come in its order (one connection): a counter not above
+    // the last taken is a copy sent again. Only key holders make entries here.
+    const std::string stream = sender + " " + topic;
+    const auto last = last_counter_.find(stream);
+    if (last != last_counter_.end() && msg.counter <= last->second) {
+      ok = false;
+    } else if (last != last_counter_.end() || last_counter_.size() < 64 * (kMaxPeers + 1)) {
+      last_counter_[stream] = msg.counter;
+    }
+  }
+  if (!ok) {
+    ++refused_;
+    const bool named = unauthenticated_.count(sender) > 0 || unauthenticated_.size() < kMaxPeers;
+    ++unauthenticated_[named ? sender.substr(0, kMaxNameLength) : std::string()];
+    ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message on " << topic << " claiming to be from '"
+                                                              << sender.substr(0, kMaxNameLength)
+                                                              << "' refused: no valid team key MAC, or a replay");
+  }
+  return ok;
+}
 
 void TeamLink::advertiseNewPeers() {
   std::vector<std::string> names;
@@ -331,7 +488,7 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
   };
   const bool well_formed =
       width == static_cast<size_t>(descriptor_bytes_) && bytes <= kMaxMessageBytes &&
-      bytes <= 4 * static_cast<size_t>(settings_.team_summary_bytes) + kMaxSummaryOverheadBytes &&
+      bytes <= maxSummaryBytes(static_cast<uint64_t>(settings_.team_summary_bytes)) &&
       station_names(msg->known_stations) && station_names(msg->unreachable) && msg->descriptors.size() % width == 0 &&
       msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
       msg->descriptors.size() <= 4 * static_cast<size_t>(settings_.team_summary_bytes) &&
@@ -526,6 +683,8 @@ void TeamLink::take(const std::string& name, const mild_lcd::PlaceSummary::Const
       if (Peer* p = peer(name)) ++p->refused;  // too many remote robots
       return;
     }
+    // A keyframe the peer has (its summary carries descriptors): its loops may name it.
+    ledger_.announced(name, msg->robot, msg->session, msg->id);
     pending.replaced = shared_.replaced;
     asked = pending.answer.needs_features;
   }
@@ -550,7 +709,7 @@ void TeamLink::sendPull(uint64_t request_id, Pending& pending) {
   request.kind = mild_lcd::TeamRequest::FEATURES;
   request.robot = pending.summary->robot;
   request.id = pending.summary->id;
-  publishTo(p->to_requests, request);
+  sendTo(p->to_requests, request);
   p->bytes_out += bytesOf(request);
   pending.asked = Clock::now();
   ++pending.attempts;
@@ -607,6 +766,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     msg = boost::make_shared<mild_lcd::LoopClosure>(loopClosureToMsg(
         result, header, shared_.robot(robots.front()).map().size(), settings_.publish_correspondences, robot_names_));
     msg->query_id = pending.summary->id;
+    msg->query_session = pending.summary->session;  // ids repeat across sessions: the pair names it
     msg->query_robot = pending.summary->robot;
     msg->query_station = pending.peer;
     msg->features = static_cast<int32_t>(pending.summary->features);
@@ -624,51 +784,110 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
       p->unacknowledged.push_back({loop, Clock::now()});
-      publishTo(p->to_loops, loop);
+      sendTo(p->to_loops, *loop);
       p->bytes_out += bytesOf(*loop);
     }
   }
   publish_(robots, msg);
 }
 
+// A peer's loop for one of this station's keyframes is published only as this station stored and
+// heard it: its query a keyframe stored here for that robot (id and session), its candidates
+// keyframes the decider announced, its content well formed (peerLoopContentProblem), and
+// `accepted` decided here. A loop refused is counted; when its decider is a peer whose summaries
+// this station took, its number is taken too, so that the decider's later loops are not held
+// behind it (the decider resends a loop until it is counted).
 void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
   const size_t robot = robotIndex(loop->loop.query_robot);
   uint64_t loops_from = 0;
+  bool caught_up = false;  // every summary the decider numbered is taken here
   {
     std::lock_guard<std::mutex> guard(mutex_);
-    Peer* p = peer(loop->decider);  // only a peer's loops are taken: a name is not a ledger entry
-    if (!p || robot >= robot_names_.size() || loop->loop.query_station != settings_.team_station ||
-        bytesOf(*loop) > kMaxMessageBytes) {
-      if (p) {
-        ++p->refused;
+    // Only a peer's loops are taken: a name never heard from makes no peer and no ledger entry.
+    const auto it = peers_.find(loop->decider);
+    if (it == peers_.end() || !it->second.seen || bytesOf(*loop) > kMaxMessageBytes) {
+      if (it != peers_.end()) {
+        ++it->second.refused;
       } else {
         ++refused_;
       }
+      ROS_WARN_STREAM_THROTTLE(10.0, "team link: a loop from '" << loop->decider.substr(0, kMaxNameLength)
+                                                                 << "', not a peer heard from, refused");
       return;
     }
-    loops_from = p->loops_from;
+    loops_from = it->second.loops_from;
+    caught_up = it->second.summaries <= it->second.taken;
   }
+  PeerLoopRules rules;
+  rules.station = settings_.team_station;
+  rules.max_correspondences = static_cast<size_t>(settings_.max_keyframe_features);
+  std::string problem;
   {
     const auto lock = shared_.lock();
-    // In their order only: a later one is dropped and comes again (the decider resends until
-    // acknowledged), an earlier one was published already. A decider that can no longer send the
-    // next one expected (it restarted, or crashed, with loops unacknowledged) is followed: those
-    // loops are lost, and counted.
-    uint64_t expected = ledger_.loopsReceivedFrom(loop->decider);
-    const uint64_t resumes = std::min(loops_from, loop->seq);
-    if (resumes > expected) {
-      {
-        std::lock_guard<std::mutex> guard(mutex_);
-        // (loops_from is below kAbsurdCount: onStatus refuses more.)
-        if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
+    rules.max_candidates = static_cast<size_t>(shared_.team->params().candidates.max_candidates);
+    rules.decision_probability = shared_.team->params().scoring.decision_probability;
+    problem = peerLoopContentProblem(*loop, rules);
+    if (problem.empty()) problem = unknownKeyframeOf(*loop, robot);
+    // A candidate not announced yet, while the decider's summaries are still coming (both stored
+    // at once, or a gap being filled): it is resent until its summary is taken here.
+    if (!problem.empty() && problem.rfind(kNotAnnounced, 0) == 0 && !caught_up) return;
+    // A decider none of whose summaries was taken cannot have decided a loop (its candidates are
+    // its keyframes): nothing of it goes into the ledger.
+    bool in_turn = false;  // the next of its loops expected here
+    bool copy = false;     // one taken already (a resend crossing the acknowledgement)
+    if (ledger_.received(loop->decider) > 0) {
+      // In their order only: a later one is dropped and comes again (the decider resends until
+      // acknowledged), an earlier one was published already. A decider that can no longer send the
+      // next one expected (it restarted, or crashed, with loops unacknowledged) is followed: those
+      // loops are lost, and counted.
+      uint64_t expected = ledger_.loopsReceivedFrom(loop->decider);
+      const uint64_t resumes = std::min(loops_from, loop->seq);
+      if (resumes > expected) {
+        {
+          std::lock_guard<std::mutex> guard(mutex_);
+          // (loops_from is below kAbsurdCount: onStatus refuses more.)
+          if (Peer* p = peer(loop->decider)) p->loops_lost += resumes - expected;
+        }
+        ledger_.skipLoopsReceivedTo(loop->decider, resumes);
+        expected = resumes;
       }
-      ledger_.skipLoopsReceivedTo(loop->decider, resumes);
-      expected = resumes;
+      in_turn = loop->seq == expected;
+      copy = loop->seq < expected;
+      if (in_turn) ledger_.tookLoop(loop->decider);
+    } else if (problem.empty()) {
+      problem = kNotAnnounced;
     }
-    if (loop->seq != expected) return;
-    ledger_.tookLoop(loop->decider);
+    if (!problem.empty()) {
+      if (copy) return;
+      std::lock_guard<std::mutex> guard(mutex_);
+      if (Peer* p = peer(loop->decider)) ++p->refused;
+      ROS_WARN_STREAM_THROTTLE(10.0, "team link: a loop from '" << loop->decider << "' refused: " << problem);
+      return;
+    }
+    if (!in_turn) return;
   }
-  publish_({robot}, boost::make_shared<const mild_lcd::LoopClosure>(loop->loop));
+  publish_({robot}, peerLoopAsPublished(*loop, rules));
+}
+
+// Under the detector lock: "" when the loop's query is a keyframe this station stored for that
+// robot (as the decider names it: id and session) and each candidate one the decider announced;
+// else why not.
+std::string TeamLink::unknownKeyframeOf(const mild_lcd::TeamLoop& loop, size_t robot) const {
+  const mild_lcd::LoopClosure& l = loop.loop;
+  if (robot >= robot_names_.size()) return "no robot '" + l.query_robot.substr(0, kMaxNameLength) + "' here";
+  const mild::KeyframeMap& map = shared_.robot(robot).map();
+  const auto index = map.find(l.query_id);
+  if (!index || map.record(*index).session != l.query_session) {
+    return "its query, keyframe " + std::to_string(l.query_id) + " of session " + std::to_string(l.query_session) +
+           ", is not in " + l.query_robot + "'s map";
+  }
+  for (const auto& c : l.candidates) {
+    if (!ledger_.wasAnnounced(loop.decider, c.robot, c.session, c.id)) {
+      return std::string(kNotAnnounced) + ": keyframe " + std::to_string(c.id) + " of session " +
+             std::to_string(c.session) + " of its robot '" + c.robot.substr(0, kMaxNameLength) + "'";
+    }
+  }
+  return "";
 }
 
 size_t TeamLink::robotIndex(const std::string& name) const {
@@ -695,14 +914,14 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
         busy.request_id = request->request_id;
         busy.status = mild_lcd::TeamFeatures::BUSY;
         busy.reason = "more than ~team/max_requests_per_second requests";
-        publishTo(p->to_features, busy);
+        sendTo(p->to_features, busy);
       }
       return;
     }
     p->tokens -= 1.0;
   }
   if (request->kind == mild_lcd::TeamRequest::SUMMARIES) {
-    std::vector<mild_lcd::PlaceSummary::ConstPtr> batch;
+    std::vector<mild_lcd::PlaceSummary::Ptr> batch;
     {
       const auto lock = shared_.lock();
       const uint64_t end = std::min<uint64_t>(
@@ -712,7 +931,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
     std::lock_guard<std::mutex> guard(mutex_);
     Peer* p = peer(request->from);
     for (const auto& s : batch) {
-      publishTo(p->to_summaries, s);
+      sendTo(p->to_summaries, *s);
       p->bytes_out += bytesOf(*s);
     }
     return;
@@ -742,7 +961,7 @@ void TeamLink::serve(const mild_lcd::TeamRequest::ConstPtr& request) {
   std::lock_guard<std::mutex> guard(mutex_);
   Peer* p = peer(request->from);
   if (reply->status != mild_lcd::TeamFeatures::OK) ++p->refused;
-  publishTo(p->to_features, reply);
+  sendTo(p->to_features, *reply);
   p->bytes_out += bytesOf(*reply);
 }
 
@@ -777,7 +996,7 @@ void TeamLink::tick() {
       request.kind = mild_lcd::TeamRequest::SUMMARIES;
       request.first = p.taken;
       request.count = static_cast<uint32_t>(settings_.team_backfill_batch);
-      publishTo(p.to_requests, request);
+      sendTo(p.to_requests, request);
       p.bytes_out += bytesOf(request);
       p.backfill_asked = now;
     }
@@ -786,7 +1005,9 @@ void TeamLink::tick() {
     for (auto& sent : p.unacknowledged) {
       if (resent == kMaxResendsPerTick) break;
       if (now - sent.at < kResendAfter) continue;
-      publishTo(p.to_loops, sent.loop);
+      // A new counter and MAC: the receiver refuses a copy of the one sent before as a replay.
+      mild_lcd::TeamLoop again = *sent.loop;
+      sendTo(p.to_loops, again);
       p.bytes_out += bytesOf(*sent.loop);
       sent.at = now;
       ++resent;
@@ -797,6 +1018,7 @@ void TeamLink::tick() {
     Peer* p = peer(pending.peer);
     if (p && connected(*p) && now - pending.asked >= kResendAfter) sendPull(id, pending);
   }
+  sign(*status, status_pub_.getTopic());
   status_pub_.publish(status);
 }
 
@@ -826,6 +1048,13 @@ void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   stat.add("summaries sent", summaries_out_);
   stat.add("summary bytes sent", summary_bytes_out_);
   stat.add("refused from no peer", refused_);
+  stat.add("refused unread (oversized, or another type)", refused_unread_);
+  stat.add("team key", key_ ? "yes: messages without its MAC, and replays, are refused"
+                            : "NO: anyone who can publish on /mild_team/ can inject loops (set ~team/key_file)");
+  for (const auto& [claimed, count] : unauthenticated_) {
+    stat.add((claimed.empty() ? std::string("(other names)") : claimed) + ": refused, no valid team key MAC or a replay",
+             count);
+  }
   if (disconnected > 0) {
     stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu of %zu peers disconnected, %lu summaries behind",
                   disconnected, peers_.size(), static_cast<unsigned long>(backlog_total));

@@ -20,6 +20,9 @@
 //   this link's own thread, and holds the detector lock only to query, judge and serve.
 // - Every message is topic traffic (no service calls, which could block on a dead link and need
 //   one master): relaying /mild_team/ between masters gives the same behaviour.
+// - Team key (~team/key_file): every message sent carries a counter and an HMAC-SHA256 under the
+//   key; one received without a valid MAC, or not above its sender's last counter on its topic, is
+//   refused before it is read, and counted against its claimed sender. Without a key: warned about.
 // - Hostile peers: malformed, oversized or other-width messages are refused and counted; more than
 //   ~team/max_requests_per_second requests from one peer are refused as busy; unknown keyframes
 //   get UNKNOWN. Every inbox is bounded.
@@ -33,6 +36,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -50,6 +54,7 @@
 #include "mild_lcd/ros/detection/shared_detector.hpp"
 #include "mild_lcd/ros/settings/node_settings.hpp"
 #include "mild_lcd/team/station_ledger.hpp"
+#include "mild_lcd/team/team_key.hpp"
 
 namespace mild_lcd {
 
@@ -60,12 +65,15 @@ class TeamLink {
 
   // nh: the node's namespace handle (topics go under /mild_team/, absolute). ledger_path: where
   // the ledger is saved beside the maps (empty: never). Throws InvalidInput for a bad station name.
+  // key_file: the team key (~team/key_file), read at start(); empty: no key, and anyone who can
+  // publish on /mild_team/ can inject loops (warned about at start-up and in diagnostics).
   TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
-           std::vector<std::string> robot_names, std::string ledger_path, PublishLoop publish);
+           std::vector<std::string> robot_names, std::string ledger_path, std::string key_file, PublishLoop publish);
   ~TeamLink();
 
-  // After the maps were loaded: reads the ledger when its file exists (a restart), subscribes and
-  // starts the link's thread. Throws IoError/InvalidInput for an unreadable ledger.
+  // After the maps were loaded: reads the team key and the ledger when its file exists (a restart),
+  // subscribes and starts the link's thread. Throws IoError/InvalidInput for an unreadable ledger or
+  // key (a key file others can read is refused).
   void start();
   // Unsubscribes and joins the thread; what waits is kept in the ledger's counts (asked again).
   void stop();
@@ -130,6 +138,7 @@ class TeamLink {
   void serve(const mild_lcd::TeamRequest::ConstPtr& request);
   void onFeatures(const mild_lcd::TeamFeatures::ConstPtr& reply);
   void onLoop(const mild_lcd::TeamLoop::ConstPtr& loop);
+  std::string unknownKeyframeOf(const mild_lcd::TeamLoop& loop, size_t robot) const;
   void sendPull(uint64_t request_id, Pending& pending);
 
   void onSummary(const mild_lcd::PlaceSummary::ConstPtr& msg);
@@ -139,6 +148,18 @@ class TeamLink {
   void onRequest(const mild_lcd::TeamRequest::ConstPtr& msg);
   void onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg);
   void onLoopMsg(const mild_lcd::TeamLoop::ConstPtr& msg);
+  // Numbers and, with a key, authenticates `msg` for `topic`; then publishes it there (when advertised).
+  template <class M>
+  void sign(M& msg, const std::string& topic);
+  template <class M>
+  void sendTo(const ros::Publisher& to, M& msg);
+  // Whether `msg`, arrived on `topic`, carries a valid MAC under the team key and a counter above the
+  // last of its sender's there (always, without a key); else it is counted against its claimed sender.
+  template <class M>
+  bool authentic(const M& msg, const std::string& topic, const std::string& sender);
+  template <class M>
+  ros::Subscriber subscribeBounded(const std::string& name, uint32_t queue, uint64_t max_bytes,
+                                   void (TeamLink::*handle)(const typename M::ConstPtr&));
   // Into a bounded inbox for the link's thread; a full one refuses (counted).
   template <class Ptr>
   void queue(std::deque<Ptr>& inbox, const Ptr& msg);
@@ -157,6 +178,9 @@ class TeamLink {
   SharedDetector& shared_;
   const std::vector<std::string> robot_names_;
   const std::string ledger_path_;
+  const std::string key_file_;
+  std::optional<mild::TeamKey> key_;  // read at start(), then only read
+  std::atomic<uint64_t> next_counter_;  // messages this station sent: from the wall clock's ns at start
   PublishLoop publish_;
   mild::StationLedger ledger_;  // under the detector lock
   size_t summary_descriptors_ = 0;
@@ -176,6 +200,11 @@ class TeamLink {
   std::map<std::string, uint32_t> remote_sessions_;  // per remote robot: its last summary's session (thread only)
   uint64_t next_request_ = 1;
   uint64_t refused_ = 0;      // from no peer (malformed names, too many peers, full inboxes)
+  uint64_t refused_unread_ = 0;  // of them, refused before deserialising (oversized, or another type)
+  // With a team key: messages without a valid MAC, or replayed, per claimed sender (the first
+  // kMaxPeers names; the others under ""), and the last counter taken per sender and topic.
+  std::map<std::string, uint64_t> unauthenticated_;
+  std::map<std::string, uint64_t> last_counter_;
   uint64_t inbox_bytes_ = 0;  // of requests_, replies_ and loops_
   uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
   // This station's summary numbers skipped this run because peers held them (a restart without the
