@@ -386,7 +386,8 @@ TEST(LoopDetector, APlaceVisitedTwiceBeforeIsNotAnotherPlace) {
   ASSERT_GT(third_pass_best, 20u);
   EXPECT_LE(other_places, third_pass_best / 10) << "the first and second passes counted as two places";
   EXPECT_GE(accepted[2], accepted[1]) << "the third pass lost loops the second closed";
-  EXPECT_EQ(samePlace(detector.map(), 5, 5 + pass, 0), true) << "keyframe 5 + pass was found to show keyframe 5's place";
+  EXPECT_EQ(samePlace(detector.map(), 5, 5 + pass, 0), true)
+      << "keyframe 5 + pass was found to show keyframe 5's place";
 }
 
 // A front-end's keyframes can be sparse and a session short: a revisit at the first keyframe that

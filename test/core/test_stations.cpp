@@ -5,9 +5,9 @@
 
 #include <gtest/gtest.h>
 
-#include <nlohmann/json.hpp>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <nlohmann/json.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -273,7 +273,8 @@ TEST(TeamKey, IsHmacSha256AndRefusesAnyChange) {
 // The key file must be readable only by its owner, this process's user, and a regular file: a key
 // others can read is no key (refused, saying why), a link or FIFO is never followed or waited on.
 TEST(TeamKey, IsReadOnlyFromAFileOnlyItsOwnerCanRead) {
-  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("mild_team_key_" + std::to_string(::getpid()));
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("mild_team_key_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   const std::string file = (dir / "team.key").string();
@@ -287,7 +288,8 @@ TEST(TeamKey, IsReadOnlyFromAFileOnlyItsOwnerCanRead) {
   const std::string data = "x";
   const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
   const TeamKey::Mac mac = key.mac(bytes, 1);
-  EXPECT_TRUE(TeamKey(std::string(64, 'f')).verify(bytes, 1, mac.data(), mac.size())) << "the trailing newline is not key";
+  EXPECT_TRUE(TeamKey(std::string(64, 'f')).verify(bytes, 1, mac.data(), mac.size()))
+      << "the trailing newline is not key";
   if (::geteuid() == 0) {
     ASSERT_EQ(::chown(file.c_str(), 65534, 65534), 0);
     EXPECT_THROW(TeamKey::fromFile(file), InvalidInput) << "owned by another user";

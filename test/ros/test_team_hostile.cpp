@@ -6,9 +6,9 @@
 
 #include <ros/network.h>
 #include <ros/ros.h>
-#include <xmlrpcpp/XmlRpc.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
+#include <xmlrpcpp/XmlRpc.h>
 
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -20,8 +20,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <iostream>
 #include <functional>
+#include <iostream>
 #include <iterator>
 #include <limits>
 #include <map>
@@ -68,8 +68,7 @@ std::vector<double> answerTimes(const std::vector<mild_lcd::Keyframe>& keyframes
   ros::Subscriber sub =
       nh.subscribe<mild_lcd::LoopClosure>(ns + "/loop_closure", 1000, [&](const mild_lcd::LoopClosure::ConstPtr& m) {
         std::lock_guard<std::mutex> lock(mutex);
-        if (m->query_station == station && m->query_robot == robot)
-          answered.emplace(m->query_id, ros::WallTime::now());
+        if (m->query_station == station && m->query_robot == robot) answered.emplace(m->query_id, ros::WallTime::now());
       });
   ros::Publisher pub = nh.advertise<mild_lcd::Keyframe>(ns + "/keyframe", 1000);
   EXPECT_TRUE(waitForSubscriber(pub, 30.0));
@@ -530,7 +529,8 @@ pid_t startStation(const std::string& ns, const std::string& station, const std:
     const std::string ns_arg = "__ns:=" + ns, station_arg = "_team/station:=" + station,
                       dir_arg = "_database_dir:=" + folder, path_arg = "_database_path:=" + station + ".mild";
     execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", station_arg.c_str(), dir_arg.c_str(),
-          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false", static_cast<char*>(nullptr));
+          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false",
+          static_cast<char*>(nullptr));
     _exit(127);
   }
   return pid;

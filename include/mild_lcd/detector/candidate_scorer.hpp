@@ -47,7 +47,8 @@ struct ScoringParams {
       "significance being -log10 of the verified model's number of false alarms given the matches, the inlier "
       "tolerance and the image area (0 when chance explains it) and saliency the robust z of its similarity "
       "among the query's eligible keyframes, and another place's significance that of the most significant of "
-      "the distinct places verified on purpose (distinct_places) more than distinct_place_gap keyframes away: p = 1 / (1 + exp(-(bias + weights . x))), fitted by maximum "
+      "the distinct places verified on purpose (distinct_places) more than distinct_place_gap keyframes away: p = 1 / "
+      "(1 + exp(-(bias + weights . x))), fitted by maximum "
       "likelihood so that it is P(a true loop). A candidate that fails verification keeps its probability, "
       "capped just below decision_probability, and accepted is exactly probability >= decision_probability. Off "
       "(or verification off) gives the filter's probability as it is.");

@@ -27,8 +27,8 @@ struct LoopCandidate {
   // The significance of the most significant other distinct place of its map verified on purpose
   // (CandidateScorer::Evidence::other_place_significance).
   double other_place_significance = 0.0;
-  bool accepted = false;            // probability >= scoring/decision_probability (so verified, when verifying)
-  Verification verification;        // geometric check (verified=false, inliers=0 when verification is off)
+  bool accepted = false;      // probability >= scoring/decision_probability (so verified, when verifying)
+  Verification verification;  // geometric check (verified=false, inliers=0 when verification is off)
 };
 
 struct StepStats {

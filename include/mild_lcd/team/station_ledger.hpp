@@ -107,12 +107,12 @@ class StationLedger {
 
   std::string station_;
   size_t robots_ = 0;
-  std::vector<Own> own_;                            // by seq
-  std::vector<std::vector<Numbered>> numbered_;     // per robot, by map index: its keyframes' seqs
-  std::map<std::string, uint64_t> received_;        // per peer
-  std::map<std::string, uint64_t> loops_sent_;      // per peer
-  std::map<std::string, uint64_t> loops_received_;  // per peer
-  using KeyframeKeys = std::set<std::pair<uint32_t, uint64_t>>;                   // (session, id)
+  std::vector<Own> own_;                                         // by seq
+  std::vector<std::vector<Numbered>> numbered_;                  // per robot, by map index: its keyframes' seqs
+  std::map<std::string, uint64_t> received_;                     // per peer
+  std::map<std::string, uint64_t> loops_sent_;                   // per peer
+  std::map<std::string, uint64_t> loops_received_;               // per peer
+  using KeyframeKeys = std::set<std::pair<uint32_t, uint64_t>>;  // (session, id)
   std::map<std::string, std::map<std::string, KeyframeKeys>> announced_;  // per peer, per robot of it
 };
 

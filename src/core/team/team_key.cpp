@@ -35,8 +35,8 @@ TeamKey TeamKey::fromFile(const std::string& path) {
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     why = "is not a regular file";
   } else if (st.st_uid != ::geteuid()) {
-    why = "is owned by user " + std::to_string(st.st_uid) + ", not by this process's user " +
-          std::to_string(::geteuid());
+    why =
+        "is owned by user " + std::to_string(st.st_uid) + ", not by this process's user " + std::to_string(::geteuid());
   } else if ((st.st_mode & 077) != 0) {
     why = "can be read or written by others than its owner (chmod 600 it)";
   } else if (st.st_size > 4096) {

@@ -13,7 +13,8 @@ bool finite(double v) { return std::isfinite(v); }
 bool share(double v) { return finite(v) && v >= 0.0 && v <= 1.0; }  // a probability or a ratio
 
 std::string candidateProblem(const mild_lcd::LoopCandidate& c, const std::string& decider, const PeerLoopRules& rules) {
-  if (c.station != decider) return "a candidate of station '" + c.station.substr(0, kMaxTextBytes) + "', not the decider's";
+  if (c.station != decider)
+    return "a candidate of station '" + c.station.substr(0, kMaxTextBytes) + "', not the decider's";
   if (c.robot.empty() || c.robot.size() > kMaxTextBytes) return "a candidate without a valid robot name";
   if (!share(c.probability) || !share(c.filter_probability)) return "a candidate's probability is not in [0, 1]";
   if (!finite(c.similarity) || c.similarity < 0.0) return "a candidate's similarity is not a finite value >= 0";

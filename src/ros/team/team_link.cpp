@@ -154,9 +154,9 @@ TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetec
       key_file_(std::move(key_file)),
       // Above every counter of this station's earlier runs (a run sends far fewer than a message a
       // nanosecond), so that a restart's messages are not taken for replays.
-      next_counter_(static_cast<uint64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                              std::chrono::system_clock::now().time_since_epoch())
-                                              .count())),
+      next_counter_(static_cast<uint64_t>(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+              .count())),
       publish_(std::move(publish)),
       ledger_(settings.team_station, robot_names_.size()) {
   descriptor_bytes_ = shared_.team->params().features.descriptorBytes();
@@ -190,11 +190,10 @@ ros::Subscriber TeamLink::subscribeBounded(const std::string& name, uint32_t que
             ++refused_;
             ++refused_unread_;
           }
-          ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message of " << raw->size() << " bytes of type '"
-                                                                    << raw->getDataType() << "' on " << name
-                                                                    << " refused unread (at most " << max_bytes
-                                                                    << " bytes of " << ros::message_traits::datatype<M>()
-                                                                    << ")");
+          ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message of "
+                                             << raw->size() << " bytes of type '" << raw->getDataType() << "' on "
+                                             << name << " refused unread (at most " << max_bytes << " bytes of "
+                                             << ros::message_traits::datatype<M>() << ")");
           return;
         }
         (this->*handle)(msg);
@@ -211,8 +210,9 @@ void TeamLink::start() {
   if (!key_file_.empty()) {
     key_ = mild::TeamKey::fromFile(key_file_);
   } else {
-    ROS_WARN_STREAM("team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject loops "
-                    "and take this station's numbers (docs/multi_robot.md, \"The team key\")");
+    ROS_WARN_STREAM(
+        "team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject loops "
+        "and take this station's numbers (docs/multi_robot.md, \"The team key\")");
   }
   if (!ledger_path_.empty() && settings_.load_on_start &&
       std::filesystem::is_directory(std::filesystem::path(ledger_path_).parent_path())) {
@@ -240,15 +240,15 @@ void TeamLink::start() {
   status_pub_ = nh_.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
   // Each message's size is checked before it is deserialised (subscribeBounded).
   const uint64_t summary_bytes = maxSummaryBytes(static_cast<uint64_t>(settings_.team_summary_bytes));
-  summaries_sub_ = subscribeBounded<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000, summary_bytes,
-                                                            &TeamLink::onSummary);
+  summaries_sub_ =
+      subscribeBounded<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000, summary_bytes, &TeamLink::onSummary);
   backfill_sub_ =
       subscribeBounded<mild_lcd::PlaceSummary>(topic(me, "summaries"), 1000, summary_bytes, &TeamLink::onBackfill);
   status_sub_ = subscribeBounded<mild_lcd::TeamStatus>("/mild_team/status", 100, kMaxStatusBytes, &TeamLink::onStatus);
   requests_sub_ =
       subscribeBounded<mild_lcd::TeamRequest>(topic(me, "requests"), 1000, kMaxRequestBytes, &TeamLink::onRequest);
-  features_sub_ = subscribeBounded<mild_lcd::TeamFeatures>(topic(me, "features"), 100, kMaxMessageBytes,
-                                                           &TeamLink::onFeaturesMsg);
+  features_sub_ =
+      subscribeBounded<mild_lcd::TeamFeatures>(topic(me, "features"), 100, kMaxMessageBytes, &TeamLink::onFeaturesMsg);
   loops_sub_ = subscribeBounded<mild_lcd::TeamLoop>(topic(me, "loops"), 1000, kMaxMessageBytes, &TeamLink::onLoopMsg);
   thread_ = std::thread([this] { run(); });
   started_ = true;
@@ -812,7 +812,7 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
         ++refused_;
       }
       ROS_WARN_STREAM_THROTTLE(10.0, "team link: a loop from '" << loop->decider.substr(0, kMaxNameLength)
-                                                                 << "', not a peer heard from, refused");
+                                                                << "', not a peer heard from, refused");
       return;
     }
     loops_from = it->second.loops_from;
@@ -1052,8 +1052,9 @@ void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   stat.add("team key", key_ ? "yes: messages without its MAC, and replays, are refused"
                             : "NO: anyone who can publish on /mild_team/ can inject loops (set ~team/key_file)");
   for (const auto& [claimed, count] : unauthenticated_) {
-    stat.add((claimed.empty() ? std::string("(other names)") : claimed) + ": refused, no valid team key MAC or a replay",
-             count);
+    stat.add(
+        (claimed.empty() ? std::string("(other names)") : claimed) + ": refused, no valid team key MAC or a replay",
+        count);
   }
   if (disconnected > 0) {
     stat.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%zu of %zu peers disconnected, %lu summaries behind",

@@ -179,7 +179,7 @@ class TeamLink {
   const std::vector<std::string> robot_names_;
   const std::string ledger_path_;
   const std::string key_file_;
-  std::optional<mild::TeamKey> key_;  // read at start(), then only read
+  std::optional<mild::TeamKey> key_;    // read at start(), then only read
   std::atomic<uint64_t> next_counter_;  // messages this station sent: from the wall clock's ns at start
   PublishLoop publish_;
   mild::StationLedger ledger_;  // under the detector lock
@@ -199,7 +199,7 @@ class TeamLink {
   std::map<uint64_t, Pending> pending_;              // by request id
   std::map<std::string, uint32_t> remote_sessions_;  // per remote robot: its last summary's session (thread only)
   uint64_t next_request_ = 1;
-  uint64_t refused_ = 0;      // from no peer (malformed names, too many peers, full inboxes)
+  uint64_t refused_ = 0;         // from no peer (malformed names, too many peers, full inboxes)
   uint64_t refused_unread_ = 0;  // of them, refused before deserialising (oversized, or another type)
   // With a team key: messages without a valid MAC, or replayed, per claimed sender (the first
   // kMaxPeers names; the others under ""), and the last counter taken per sender and topic.
