@@ -18,6 +18,7 @@
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/detector/process_image.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
+#include "mild_lcd/verification/chance_agreement.hpp"
 #include "test_images.hpp"
 
 namespace fs = std::filesystem;
@@ -298,11 +299,14 @@ TEST(LoopDetector, StoppingVerificationEarlyKeepsEveryKeyframesBestCandidateAndW
 }
 
 // A verifier of a scene that repeats itself: every candidate has few matches, so early stop
-// would skip all but the first, and every fit is very significant (another place verifies too).
+// skips most, and every fit is as significant as its matches allow (another place verifies too).
+// As significant as they allow and no more: early stop bounds a fit by exactly that, and a verifier
+// beyond it would make the two detectors below rank differently and remember other places.
 class RepetitiveSceneVerifier : public CandidateVerifier {
  public:
-  static constexpr int kMatches = 8;
-  static constexpr double kLog10FalseAlarms = -30.0;
+  static constexpr int kMatches = 12;
+  inline static const double kLog10FalseAlarms =
+      log10FalseAlarms(kMatches, kMatches, kLeastChanceInlierProbability, kEssentialSample);
   Verification verify(const Features&, const Features&) const override {
     Verification v;
     v.attempted = v.verified = true;
