@@ -231,13 +231,13 @@ TEST_F(DatabaseFile, EachKeyframesCameraIsKept) {
 }
 
 // A file of an earlier format version made from a current one: each keyframe record loses what later
-// versions added after its id, stamp and session (version 3 its detection scale, version 2 its
-// camera intrinsics as well), and the header and checksums are made to match. ORB's 32-byte
-// descriptors.
+// versions added after its id, stamp and session (version 4 its place, version 3 its detection scale
+// as well, version 2 its camera intrinsics as well), and the header and checksums are made to match.
+// ORB's 32-byte descriptors.
 std::vector<uint8_t> earlierVersion(const std::vector<uint8_t>& current, uint32_t version) {
   std::vector<uint8_t> payload(current.begin() + 32, current.end());
-  const size_t removed = version == 3 ? 4 : 4 + 32;
-  const size_t kept = version == 3 ? 32 : 0;  // the camera, before the scale
+  const size_t removed = version == 4 ? 8 : version == 3 ? 4 + 8 : 32 + 4 + 8;
+  const size_t kept = version == 4 ? 32 + 4 : version == 3 ? 32 : 0;  // what comes before, kept
   size_t at = 0;
   const auto u32 = [&](size_t pos) {
     uint32_t v;
@@ -261,6 +261,25 @@ std::vector<uint8_t> earlierVersion(const std::vector<uint8_t>& current, uint32_
   std::memcpy(earlier.data() + 16, &size, 8);
   matchChecksums(earlier);
   return earlier;
+}
+
+// Each keyframe's place (KeyframeRecord::same_place_as) is saved and loaded; a version-4 file,
+// written before keyframes had one, loads as keyframes without it.
+TEST_F(DatabaseFile, EachKeyframesPlaceIsKeptAndAVersionFourFileHasNone) {
+  LoopDetector source(fixtureParams());
+  process(source, 0, 4);
+  source.map().markSamePlace(3, source.map().record(1).id);
+  saveMap(source.map(), path("map.mild"));
+  const MapState state = readMapFile(path("map.mild"));
+  ASSERT_EQ(state.records.size(), 4u);
+  EXPECT_FALSE(state.records[0].same_place_as.has_value());
+  EXPECT_EQ(state.records[3].same_place_as, source.map().record(1).id);
+  write(path("v4.mild"), earlierVersion(bytes(path("map.mild")), 4));
+  LoopDetector loaded(fixtureParams());
+  loadMap(loaded.map(), path("v4.mild"), true);
+  ASSERT_EQ(loaded.map().size(), 4u);
+  for (KeyframeIndex k = 0; k < 4; ++k) EXPECT_FALSE(loaded.map().record(k).same_place_as.has_value());
+  EXPECT_EQ(loaded.map().record(3).detection_scale, source.map().record(3).detection_scale);
 }
 
 // A version-2 file (written before keyframes had cameras) loads as keyframes without intrinsics.

@@ -12,11 +12,13 @@ namespace mild {
 //
 // Layout (little-endian). Header, 32 bytes: magic "MILDLCD" + '\0', format version (u32), flags
 // (u32, 0), payload size (u64), CRC-32 of the payload (u32), CRC-32 of the 28 bytes before it
-// (u32). Payload (version 4): the saving detector's parameters as "name: value" lines, the
+// (u32). Payload (version 5): the saving detector's parameters as "name: value" lines, the
 // descriptor width in bits, next id, session start, the keyframes (id, stamp, session, camera
 // intrinsics fx fy cx cy as doubles, 0 = unknown, detection scale as a float, 1 to 64: how much the
-// frame was shrunk before its keypoints were found, features/max_pixels; keypoints, descriptors),
-// the temporal filter's name and its state. Version 3 files (no detection scale: 1), version 2
+// frame was shrunk before its keypoints were found, features/max_pixels; the id of the keyframe
+// whose place it was found to show when it was stored as a u64, all ones = none; keypoints,
+// descriptors), the temporal filter's name and its state. Version 4 files (no place: none),
+// version 3 files (no detection scale: 1), version 2
 // files (no intrinsics) and version 1 files (no width, no sessions, the exclusive-hypothesis
 // filter's posterior) are read too. The MIH index is not
 // stored: it is rebuilt from the descriptors on load, with the loading detector's parameters, so a
@@ -32,7 +34,7 @@ namespace mild {
 // Saving is crash-safe (ConfinedFile::replace, io/database_directory.hpp): the file is written in
 // full under a temporary name beside it, flushed to disk, then renamed over the target, so a crash
 // at any moment leaves either the previous file or the new one, both complete.
-constexpr uint32_t kDatabaseFormatVersion = 4;
+constexpr uint32_t kDatabaseFormatVersion = 5;
 // Default bound on the size of a file to load (the node's ~max_database_mb).
 constexpr unsigned long long kDefaultMaxDatabaseBytes = 16ull << 30;
 

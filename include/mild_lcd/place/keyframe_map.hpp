@@ -36,8 +36,8 @@ struct KeyframeRecord {
   float detection_scale = 1.0f;
   // The id of the keyframe this one was found to show when it was stored (its best candidate of
   // this map, verified and more likely than not a loop), if any: two candidates chained by these
-  // are one place seen twice, not a place that repeats (LoopDetector's another-place input). Kept
-  // while the detector runs; not saved in a map file nor sent to peers.
+  // are one place seen twice, not a place that repeats (LoopDetector's another-place input). Saved
+  // in a map file (format version 5; none in an older file), not sent to peers.
   std::optional<uint64_t> same_place_as;
 };
 

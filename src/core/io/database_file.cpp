@@ -21,6 +21,10 @@
 namespace mild {
 namespace {
 
+// KeyframeRecord::same_place_as in a file (format version 5): this value for none.
+constexpr uint64_t kNoSamePlace = UINT64_MAX;
+
+
 constexpr char kMagic[8] = {'M', 'I', 'L', 'D', 'L', 'C', 'D', '\0'};
 constexpr size_t kHeaderBytes = 32;
 constexpr size_t kKeypointBytes = 6 * 4;
@@ -105,6 +109,7 @@ void writePayload(const KeyframeMap& map, PayloadWriter& w) {
     w.put(r.camera.cx);
     w.put(r.camera.cy);
     w.put(boundedDetectionScale(r.detection_scale));
+    w.put(r.same_place_as.value_or(kNoSamePlace));
     w.put(static_cast<uint32_t>(r.keypoints.size()));
     for (const cv::KeyPoint& p : r.keypoints) {
       w.put(p.pt.x);
@@ -265,7 +270,8 @@ CheckedPayload checkedPayload(const uint8_t* data, size_t size, const std::strin
 
 // Bytes of one keyframe record before its features, by format version.
 size_t recordBytes(uint32_t version) {
-  return 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0) + (version >= 4 ? 4 : 0);
+  return 8 + 8 + 4 + (version >= 2 ? 4 : 0) + (version >= 3 ? 4 * 8 : 0) + (version >= 4 ? 4 : 0) +
+         (version >= 5 ? 8 : 0);
 }
 
 void readKeyframe(Cursor& in, uint32_t version, int descriptor_width, const std::string& origin, KeyframeRecord& r,
@@ -290,6 +296,12 @@ void readKeyframe(Cursor& in, uint32_t version, int descriptor_width, const std:
                          std::to_string(r.detection_scale) + " (1 to " +
                          std::to_string(static_cast<int>(kMaxDetectionScale)) + ")");
     }
+  }
+  if (version >= 5) {
+    // The place the keyframe was found to show when it was stored: an id that names no keyframe of
+    // the map is no link (LoopDetector looks it up and stops there).
+    const auto same_place = in.get<uint64_t>("a keyframe's place");
+    if (same_place != kNoSamePlace) r.same_place_as = same_place;
   }
   const size_t features = in.count(kKeypointBytes + descriptor_bytes, "a keyframe's feature count");
   r.keypoints.resize(features);
