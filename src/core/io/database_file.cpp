@@ -24,7 +24,6 @@ namespace {
 // KeyframeRecord::same_place_as in a file (format version 5): this value for none.
 constexpr uint64_t kNoSamePlace = UINT64_MAX;
 
-
 constexpr char kMagic[8] = {'M', 'I', 'L', 'D', 'L', 'C', 'D', '\0'};
 constexpr size_t kHeaderBytes = 32;
 constexpr size_t kKeypointBytes = 6 * 4;
