@@ -1,6 +1,7 @@
 // Any binary descriptor, end to end: the pipeline on BRISK's 512 bits and AKAZE's 486 (61 bytes)
 // finds the fixture's loop as ORB's 256 do; the map file records the width and a detector of
-// another width refuses it by name; keyframes of the wrong width are refused without a trace.
+// another width refuses it by name; keyframes of the wrong width are refused without a trace; a
+// node fed a front-end's descriptors takes their width from the first keyframe.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/loop_detector.hpp"
 #include "mild_lcd/detector/process_image.hpp"
+#include "mild_lcd/detector/robot_team.hpp"
 #include "mild_lcd/io/database_file.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "random_descriptors.hpp"
@@ -195,6 +197,94 @@ TEST(KeyframeWidths, ADatabaseOfAFrontEndsOwnWidthTakesKeyframesButRefusesImages
     EXPECT_NE(std::string(e.what()).find("give it Keyframes"), std::string::npos) << e.what();
   }
   EXPECT_EQ(detector.map().size(), 3u);
+}
+
+Features randomFeatures(size_t n, std::mt19937_64& rng, int bytes) {
+  Features f;
+  f.descriptors = test::randomDescriptors(n, rng, bytes);
+  f.keypoints.assign(n, cv::KeyPoint(10.0f, 10.0f, 7.0f));
+  return f;
+}
+
+// A front-end's own descriptors (OKVIS's BRISK 64 bytes) go into a node left at its defaults: an
+// empty map takes the first keyframe's width, and afterwards refuses another, naming the setting.
+TEST(FirstKeyframeWidth, AnEmptyTeamTakesItAndRefusesAnotherAfterwardsNamingTheSetting) {
+  RobotTeam team(paramsFor("orb"), {"a", "b"});
+  team.takeWidthFromFirstKeyframe(true);
+  EXPECT_EQ(team.descriptorBytes(), 32);
+  std::mt19937_64 rng(11);
+  EXPECT_NO_THROW(team.process(Observation::ofFeatures(randomFeatures(60, rng, 64), 0.0, std::nullopt, 1)));
+  EXPECT_EQ(team.descriptorBytes(), 64);
+  EXPECT_EQ(team.robot(0).map().descriptorBytes(), 64) << "every robot's map takes it together";
+  EXPECT_EQ(team.robot(1).map().size(), 1u);
+  try {
+    team.process(Observation::ofFeatures(randomFeatures(60, rng, 32), 1.0));
+    FAIL() << "a 32-byte keyframe entered a map that took 64-byte descriptors";
+  } catch (const InvalidInput& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("its first keyframe brought"), std::string::npos) << what;
+    EXPECT_NE(what.find("set features/type orb"), std::string::npos) << what;
+  }
+  EXPECT_EQ(team.keyframes(), 1u);
+  // Emptied, it takes the next first keyframe's width again.
+  team.reset();
+  EXPECT_NO_THROW(team.process(Observation::ofFeatures(randomFeatures(60, rng, 32), 2.0)));
+  EXPECT_EQ(team.descriptorBytes(), 32);
+}
+
+TEST(FirstKeyframeWidth, IsNotTakenWhenSetOffOrFixedByDescriptorBytes) {
+  std::mt19937_64 rng(12);
+  RobotTeam off(paramsFor("orb"), {""});  // the default: a node fed images keeps its extractor's width
+  EXPECT_THROW(off.process(Observation::ofFeatures(randomFeatures(60, rng, 64), 0.0)), InvalidInput);
+  EXPECT_EQ(off.keyframes(), 0u);
+  DetectorParams fixed = paramsFor("orb");
+  fixed.features.descriptor_bytes = 32;
+  RobotTeam pinned(fixed, {""});
+  pinned.takeWidthFromFirstKeyframe(true);
+  try {
+    pinned.process(Observation::ofFeatures(randomFeatures(60, rng, 64), 0.0));
+    FAIL() << "features/descriptor_bytes 32 took a 64-byte keyframe";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("features/descriptor_bytes 32"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(pinned.descriptorBytes(), 32);
+}
+
+TEST(FirstKeyframeWidth, AMapThatHoldsAKeyframeKeepsItsWidth) {
+  std::mt19937_64 rng(13);
+  RobotTeam team(paramsFor("orb"), {""});
+  team.takeWidthFromFirstKeyframe(true);
+  team.process(Observation::ofFeatures(randomFeatures(60, rng, 32), 0.0));
+  EXPECT_FALSE(team.takeWidth(64));
+  EXPECT_THROW(team.process(Observation::ofFeatures(randomFeatures(60, rng, 64), 1.0)), InvalidInput);
+  EXPECT_EQ(team.descriptorBytes(), 32);
+  EXPECT_EQ(team.keyframes(), 1u);
+}
+
+TEST_F(MapFiles, ARefusedMapsMessageNamesTheSettingThatLoadsIt) {
+  LoopDetector brisk(paramsFor("brisk"));
+  for (size_t i = 0; i < 3; ++i) processImage(brisk, fixtureFrames()[i], PixelFormat::kGray, 0.5 * i, i);
+  saveMap(brisk.map(), path("brisk.mild"));
+  LoopDetector orb(paramsFor("orb"));
+  try {
+    loadMap(orb.map(), path("brisk.mild"), false);
+    FAIL() << "a 64-byte map was loaded into a 32-byte detector";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("set features/type brisk to load it"), std::string::npos) << e.what();
+  }
+  // A map of a width no extractor has names the width itself.
+  DetectorParams p16 = paramsFor("orb");
+  p16.features.descriptor_bytes = 16;
+  LoopDetector narrow(p16);
+  std::mt19937_64 rng(14);
+  narrow.process(Observation::ofFeatures(randomFeatures(40, rng, 16), 0.0));
+  saveMap(narrow.map(), path("narrow.mild"));
+  try {
+    loadMap(orb.map(), path("narrow.mild"), false);
+    FAIL() << "a 16-byte map was loaded into a 32-byte detector";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("set features/descriptor_bytes 16 to load it"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

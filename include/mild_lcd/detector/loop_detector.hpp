@@ -95,6 +95,15 @@ class LoopDetector {
   void setVerifier(std::unique_ptr<CandidateVerifier> verifier) { verifier_ = std::move(verifier); }
   bool verifies() const { return verifier_ != nullptr; }
 
+  // A map with no keyframe yet, of a detector whose width is its extractor's
+  // (features/descriptor_bytes 0), takes another width (a front-end's own descriptors: ORB-SLAM's
+  // 32 bytes, OKVIS's BRISK 64), so that such a front-end needs no setting whatever features/type
+  // image input uses. Returns whether the map changed width. Throws InvalidInput, changing nothing,
+  // when the parameters do not hold at that width (its bounds, the index's tables, the matcher's
+  // substrings). Images extracted at another width are refused afterwards. Replaces the map
+  // object: hold the lock its readers hold. RobotTeam::takeWidth does it for every robot at once.
+  bool takeWidth(int bytes);
+
   // Processes one keyframe: its features (extracted by a FeatureFrontEnd, or computed elsewhere,
   // e.g. by the SLAM front-end), stamp and optional id. Their descriptors must have the map's width
   // (KeyframeMap::descriptorBytes()). Their camera is stored with the keyframe (it gives verified

@@ -46,6 +46,16 @@ class RobotTeam {
   // nothing) for a robot out of range and whatever the robot's detector refuses.
   DetectionResult process(Observation observation);
 
+  // Whether the maps, while every one is empty, take the descriptor width of the first keyframe
+  // given (LoopDetector::takeWidth): for a node fed a front-end's own descriptors only. Off by
+  // default; a team across hosts keeps it off (its messages carry the width fixed at start-up).
+  void takeWidthFromFirstKeyframe(bool on) { takes_first_width_ = on; }
+  bool takesWidthFromFirstKeyframe() const { return takes_first_width_; }
+  // With it on and every map empty: every map takes `bytes` (LoopDetector::takeWidth), as before a
+  // map of that width is loaded. Returns whether they changed; throws InvalidInput as takeWidth.
+  bool takeWidth(int bytes);
+  int descriptorBytes() const { return robots_.front()->map().descriptorBytes(); }
+
   // A keyframe of a robot at another station (team across hosts), known by its summary's
   // descriptors: asked of each of this team's maps, robot r's keyframes [0, eligible[r]) (whose
   // station decides: StationLedger), each through a filter of the pair (remote robot, r). Changes
@@ -94,6 +104,7 @@ class RobotTeam {
   TemporalFilter& pairFilter(size_t from, size_t to) { return *pair_filters_[from * robots_.size() + to]; }
 
   std::vector<std::string> names_;
+  bool takes_first_width_ = false;
   std::vector<std::unique_ptr<LoopDetector>> robots_;
   std::vector<std::unique_ptr<TemporalFilter>> pair_filters_;  // [from * size() + to], none for from == to
   // Per remote robot ("station/robot"): its filter into each of this team's maps.

@@ -58,6 +58,11 @@ struct FeatureParams {
   void validate() const;        // throws InvalidInput naming the first invalid field
 };
 
+// The setting that gives a detector `bytes`-wide descriptors: "features/type <name>" when an
+// extractor extracts that width, else "features/descriptor_bytes <bytes>". Refusals of another
+// width name it, so that the user knows what to set.
+std::string descriptorSetting(int bytes);
+
 // The extractor `params.type` names, with its section's parameters. Throws InvalidInput for an
 // unknown type or invalid parameters.
 std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const FeatureParams& params);

@@ -1,5 +1,6 @@
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 
@@ -74,6 +75,10 @@ struct PreparedLoad {
 };
 PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,
                          unsigned long long max_bytes = kDefaultMaxDatabaseBytes);
+// The same from a state already read (readMapFile since `started`; `origin` names it), for callers
+// that decide something from the file (its width: RobotTeam::takeWidth) before preparing.
+PreparedLoad prepareLoad(const KeyframeMap& map, MapState state, const std::string& origin, bool continue_session,
+                         std::chrono::steady_clock::time_point started = std::chrono::steady_clock::now());
 void commitLoad(KeyframeMap& map, PreparedLoad&& prepared);
 
 // KeyframeMap::merge of a state read from a file (`origin` names it in errors and the report).

@@ -93,14 +93,18 @@ constexpr uint64_t kMaxKeyframeId = UINT64_MAX - 1;
 
 class KeyframeMap {
  public:
-  // `database` at the descriptors' width; `descriptor_name` (features/type) names that width in
-  // errors. Throws InvalidInput for invalid parameters.
+  // `database` at the descriptors' width; `descriptor_name` says where that width came from in
+  // errors ("features/type orb"). Throws InvalidInput for invalid parameters.
   KeyframeMap(const DatabaseParams& database, const FilterParams& filter, std::string descriptor_name);
 
   // --- Reading -----------------------------------------------------------------------------------
   size_t size() const { return contents_.records.size(); }
   // The width of the descriptors this map stores and accepts, in bytes.
   int descriptorBytes() const { return contents_.database.descriptorBytes(); }
+  const std::string& descriptorSource() const { return descriptor_name_; }  // where that width came from
+  // An empty map of the same parameters: what a load is prepared on (prepareRestore) without the
+  // lock on this one, which a keyframe may meanwhile give another width (LoopDetector::takeWidth).
+  KeyframeMap emptyLike() const;
   const DatabaseParams& databaseParams() const { return database_params_; }
   const KeyframeDatabase& database() const { return contents_.database; }
   const TemporalFilter& filter() const { return *contents_.filter; }

@@ -22,11 +22,17 @@ std::string parameterText(const DetectorParams& params) {
   return text;
 }
 
+// Where a detector's descriptor width comes from, as errors name it.
+std::string widthSource(const FeatureParams& features) {
+  if (features.descriptor_bytes > 0) return "features/descriptor_bytes " + std::to_string(features.descriptor_bytes);
+  return "features/type " + features.type;
+}
+
 }  // namespace
 
 LoopDetector::LoopDetector(const DetectorParams& params)
     : params_((params.validate(), params)),
-      map_(params.databaseParams(), params.filter, params.features.type),
+      map_(params.databaseParams(), params.filter, widthSource(params.features)),
       scorer_(params.scoring) {
   map_.setBuilderParameters(parameterText(params_));
   if (params_.verification.enabled) verifier_ = std::make_unique<GeometricVerifier>(params_.verification);
@@ -125,6 +131,18 @@ MapAnswer LoopDetector::queryMap(const KeyframeMap& map, const DescriptorList& q
   return answer;
 }
 
+bool LoopDetector::takeWidth(int bytes) {
+  if (bytes == map_.descriptorBytes() || map_.size() > 0 || params_.features.descriptor_bytes > 0) return false;
+  DetectorParams at_width = params_;
+  at_width.features.descriptor_bytes = bytes;
+  at_width.validate();  // the width's bounds, and the index's and matcher's layouts at it
+  KeyframeMap map(at_width.databaseParams(), params_.filter,
+                  "the " + std::to_string(bytes) + "-byte descriptors " + "its first keyframe brought");
+  map.setBuilderParameters(parameterText(at_width));
+  map_ = std::move(map);
+  return true;
+}
+
 void LoopDetector::checkFeatures(const Features& features) const {
   if (features.keypoints.size() != features.descriptors.size()) {
     throw InvalidInput("keyframe has " + std::to_string(features.keypoints.size()) + " keypoints but " +
@@ -134,8 +152,8 @@ void LoopDetector::checkFeatures(const Features& features) const {
   const auto refuseWidth = [&](int bytes) {
     if (bytes == map_.descriptorBytes()) return;
     throw InvalidInput("keyframe descriptors are " + std::to_string(bytes) + " bytes wide; this database holds " +
-                       std::to_string(map_.descriptorBytes()) + "-byte descriptors (features/type " +
-                       params_.features.type + ")");
+                       std::to_string(map_.descriptorBytes()) + "-byte descriptors (" + map_.descriptorSource() +
+                       "): set " + descriptorSetting(bytes) + " for these");
   };
   if (features.declared_bytes != 0) refuseWidth(features.declared_bytes);  // judged even without descriptors
   for (const Descriptor& d : features.descriptors) refuseWidth(d.bytes);

@@ -65,8 +65,21 @@ std::vector<OtherMap> RobotTeam::otherMaps(size_t robot) {
 
 DetectionResult RobotTeam::process(Observation observation) {
   const size_t robot = observation.robot;
+  if (robot >= robots_.size()) throw InvalidInput("no robot " + std::to_string(robot));
+  if (takes_first_width_ && !observation.image) {
+    const Features& f = observation.features;
+    takeWidth(f.declared_bytes != 0 ? f.declared_bytes : f.descriptors.empty() ? 0 : f.descriptors.front().bytes);
+  }
   const std::vector<OtherMap> others = otherMaps(robot);
   return robots_[robot]->process(std::move(observation), others, static_cast<uint32_t>(robot));
+}
+
+bool RobotTeam::takeWidth(int bytes) {
+  if (!takes_first_width_ || bytes == 0 || keyframes() > 0 || bytes == descriptorBytes()) return false;
+  // All maps at once: a keyframe is looked up in the other robots' maps too, which must hold its
+  // width. The first throws for parameters that do not hold at it, before any map changed.
+  for (auto& detector : robots_) detector->takeWidth(bytes);
+  return true;
 }
 
 RobotTeam::RemoteAnswer RobotTeam::askRemote(const std::string& remote_robot, const DescriptorList& descriptors,

@@ -23,6 +23,15 @@ int FeatureParams::extractorBytes() const {
 
 int FeatureParams::descriptorBytes() const { return descriptor_bytes > 0 ? descriptor_bytes : extractorBytes(); }
 
+std::string descriptorSetting(int bytes) {
+  std::string setting;
+  FeatureExtractors::forEach([&](auto entry) {
+    using E = typename decltype(entry)::type;
+    if (setting.empty() && E::kDescriptorBytes == bytes) setting = std::string("features/type ") + E::kName;
+  });
+  return setting.empty() ? "features/descriptor_bytes " + std::to_string(bytes) : setting;
+}
+
 void FeatureParams::validate() const {
   validateDeclared(*this);
   forEachSection(extractors, [](const auto& section) { section.validate(); });

@@ -428,10 +428,11 @@ MapState readMapFile(const ConfinedFile& file, unsigned long long max_bytes) {
   }
 }
 
-PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,
-                         unsigned long long max_bytes) {
-  const auto start = std::chrono::steady_clock::now();
-  MapState state = readMapFile(file, max_bytes);
+namespace {
+
+// prepareLoad of a state read since `start` (the report's time counts the reading).
+PreparedLoad prepareRead(const KeyframeMap& map, MapState state, const std::string& origin, bool continue_session,
+                         std::chrono::steady_clock::time_point start) {
   LoadReport report;
   report.keyframes = state.records.size();
   for (const auto& d : state.descriptors) report.features += d.size();
@@ -450,20 +451,32 @@ PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool 
   try {
     restore.emplace(map.prepareRestore(std::move(state), continue_session));
   } catch (const InvalidInput& e) {
-    throw InvalidInput(file.display() + ": " + e.what());
+    throw InvalidInput(origin + ": " + e.what());
   } catch (const std::bad_alloc&) {
-    throw CapacityError(file.display() + ": not enough memory to rebuild the index of " +
-                        std::to_string(report.keyframes) + " keyframes");
+    throw CapacityError(origin + ": not enough memory to rebuild the index of " + std::to_string(report.keyframes) +
+                        " keyframes");
   }
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::ostringstream msg;
   msg.precision(3);
-  msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << file.display()
-      << " in " << report.seconds << " s"
-      << (continue_session ? ", continuing the saved session" : ", as a new session");
+  msg << "loaded " << report.keyframes << " keyframes (" << report.features << " features) from " << origin << " in "
+      << report.seconds << " s" << (continue_session ? ", continuing the saved session" : ", as a new session");
   if (!differing.empty()) msg << "; index rebuilt with this node's parameters (" << differing << ")";
   report.message = msg.str();
   return PreparedLoad{std::move(*restore), std::move(report)};
+}
+
+}  // namespace
+
+PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,
+                         unsigned long long max_bytes) {
+  const auto start = std::chrono::steady_clock::now();
+  return prepareRead(map, readMapFile(file, max_bytes), file.display(), continue_session, start);
+}
+
+PreparedLoad prepareLoad(const KeyframeMap& map, MapState state, const std::string& origin, bool continue_session,
+                         std::chrono::steady_clock::time_point started) {
+  return prepareRead(map, std::move(state), origin, continue_session, started);
 }
 
 void commitLoad(KeyframeMap& map, PreparedLoad&& prepared) { map.commitRestore(std::move(prepared.restore)); }

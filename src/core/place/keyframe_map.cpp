@@ -5,6 +5,7 @@
 #include <string>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/features/feature_source.hpp"
 
 namespace mild {
 
@@ -36,6 +37,12 @@ KeyframeMap::KeyframeMap(const DatabaseParams& database, const FilterParams& fil
       filter_params_(filter),
       descriptor_name_(std::move(descriptor_name)),
       contents_{KeyframeDatabase(database), makeTemporalFilter(filter), {}, {}, 0, 0, 0, SessionClock()} {}
+
+KeyframeMap KeyframeMap::emptyLike() const {
+  KeyframeMap map(database_params_, filter_params_, descriptor_name_);
+  map.setBuilderParameters(builder_parameters_);
+  return map;
+}
 
 std::optional<KeyframeIndex> KeyframeMap::find(uint64_t id) const {
   auto it = contents_.index_of_id.find(id);
@@ -133,8 +140,9 @@ MapContents KeyframeMap::prepareRestore(MapState state, bool continue_session) c
 void KeyframeMap::checkWidth(const MapState& state) const {
   if (state.descriptor_bytes != descriptorBytes()) {
     throw InvalidInput("the map holds " + std::to_string(state.descriptor_bytes) + "-byte descriptors, this detector " +
-                       std::to_string(descriptorBytes()) + "-byte ones (features/type " + descriptor_name_ +
-                       "): a map is only loaded by a detector with the same descriptor");
+                       std::to_string(descriptorBytes()) + "-byte ones (" + descriptor_name_ +
+                       "): a map is only loaded by a detector with the same descriptor; set " +
+                       descriptorSetting(state.descriptor_bytes) + " to load it");
   }
 }
 

@@ -1,6 +1,8 @@
 #include "mild_lcd/ros/detection/database_store.hpp"
 
+#include <chrono>
 #include <filesystem>
+#include <optional>
 
 #include "mild_lcd/common/errors.hpp"
 
@@ -54,10 +56,10 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
       start_up_pending_ = false;
       return "database " + file.display() + " does not exist yet: starting with an empty map";
     }
-    mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, false, max_bytes_);
+    mild::PreparedLoad prepared = prepare(shared, file, false);
     const std::string message = prepared.report.message;
     const auto lock = shared.lock();
-    mild::commitLoad(detector(shared).map(), std::move(prepared));
+    commit(shared, std::move(prepared));
     shared.mapReplaced(robot_, false);  // the file holds it: no change to save
     start_up_pending_ = false;
     return message;
@@ -69,6 +71,29 @@ std::string DatabaseStore::loadOnStart(SharedDetector& shared) {
     start_up_pending_ = false;
     throw;
   }
+}
+
+mild::PreparedLoad DatabaseStore::prepare(SharedDetector& shared, const mild::ConfinedFile& file,
+                                          bool continue_session) {
+  const auto start = std::chrono::steady_clock::now();
+  mild::MapState state = mild::readMapFile(file, max_bytes_);
+  std::optional<mild::KeyframeMap> empty;
+  {
+    const auto lock = shared.lock();
+    shared.team->takeWidth(state.descriptor_bytes);
+    empty.emplace(detector(shared).map().emptyLike());
+  }
+  // The index is rebuilt without the lock: keyframes go on meanwhile.
+  return mild::prepareLoad(*empty, std::move(state), file.display(), continue_session, start);
+}
+
+void DatabaseStore::commit(SharedDetector& shared, mild::PreparedLoad&& prepared) {
+  mild::KeyframeMap& map = detector(shared).map();
+  if (prepared.restore.database.descriptorBytes() != map.descriptorBytes()) {
+    throw mild::InvalidInput("a keyframe of " + std::to_string(map.descriptorBytes()) +
+                             "-byte descriptors was taken while the map was loading: load it again");
+  }
+  mild::commitLoad(map, std::move(prepared));
 }
 
 void DatabaseStore::refuseWhileStartingUp() const {
@@ -112,11 +137,10 @@ std::string DatabaseStore::autosave(SharedDetector& shared) {
 mild::LoadReport DatabaseStore::load(SharedDetector& shared, const std::string& requested, bool continue_session) {
   refuseWhileStartingUp();  // the start-up load would replace it as soon as it is in
   const mild::ConfinedFile file = resolve(requested, false);
-  // LoopDetector's parameters never change after construction: preparing needs no lock.
-  mild::PreparedLoad prepared = mild::prepareLoad(detector(shared).map(), file, continue_session, max_bytes_);
+  mild::PreparedLoad prepared = prepare(shared, file, continue_session);
   mild::LoadReport report = prepared.report;
   const auto lock = shared.lock();
-  mild::commitLoad(detector(shared).map(), std::move(prepared));
+  commit(shared, std::move(prepared));
   shared.mapReplaced(robot_);
   // A map loaded by hand is the user's decision: keyframes are taken again. ~database_path stays
   // protected (what was loaded is not what it holds), unless this was that very file.
@@ -138,6 +162,7 @@ mild::LoadReport DatabaseStore::merge(SharedDetector& shared, const std::string&
   if (!failure(shared).empty()) {
     throw mild::InvalidInput(failure(shared) + "; load_database without merge replaces it");
   }
+  shared.team->takeWidth(state.descriptor_bytes);  // an empty map fed a front-end's descriptors: the file's
   mild::LoadReport report = mild::mergeState(detector(shared).map(), std::move(state), file.display());
   shared.mapReplaced(robot_);
   return report;

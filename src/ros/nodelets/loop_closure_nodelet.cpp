@@ -138,6 +138,10 @@ class LoopClosureNodelet : public nodelet::Nodelet {
       std::vector<std::string> names = settings_.robotNames();
       if (names.empty()) names.push_back("");  // one robot: topics and services without a prefix
       shared_.team = std::make_unique<mild::RobotTeam>(mild::loadDetectorParams(source), names);
+      // Fed a front-end's own descriptors only, the maps take their width from the first keyframe
+      // (unless features/descriptor_bytes fixes it): ORB-SLAM's ORB or OKVIS's BRISK need no setting.
+      // A station's messages carry the width fixed at start-up, so a station keeps features/type's.
+      shared_.team->takeWidthFromFirstKeyframe(!settings_.use_image_input && settings_.team_station.empty());
       shared_.failure.assign(names.size(), "");
       for (size_t r = 0; r < names.size(); ++r) {
         auto robot = std::make_unique<Robot>();
@@ -205,20 +209,25 @@ class LoopClosureNodelet : public nodelet::Nodelet {
 
   void logReady() {
     // A copy, under the lock: the worker and the tuning server run already (a retune replaces them).
-    const mild::DetectorParams params = [this] {
+    mild::DetectorParams params;
+    std::string width;
+    {
       const auto lock = shared_.lock();
-      return shared_.team->params();
-    }();
+      params = shared_.team->params();
+      const bool open = shared_.team->takesWidthFromFirstKeyframe() && params.features.descriptor_bytes == 0 &&
+                        shared_.team->keyframes() == 0;
+      width = open ? "descriptors as wide as the first keyframe's"
+                   : std::to_string(shared_.team->descriptorBytes()) + "-byte descriptors";
+    }
     NODELET_INFO(
-        "mild_lcd ready: %s%s%s%s, %s features (%d-byte descriptors%s), exclusion %d keyframes, "
+        "mild_lcd ready: %s%s%s%s, %s features (%s%s), exclusion %d keyframes, "
         "verification %s, maps in %s",
         team_names_.empty() ? "" : ("robots " + settings_.robots + ", ").c_str(),
         settings_.use_image_input ? "image" : "",
         settings_.use_image_input && settings_.use_keyframe_input ? " and " : "",
-        settings_.use_keyframe_input ? "keyframe input" : "", params.features.type.c_str(),
-        params.features.descriptorBytes(), worker_->extractionThread() ? ", extracted on a thread of their own" : "",
-        params.candidates.exclusion_frames, params.verification.enabled ? "on" : "off",
-        robots_.front()->store->directory().c_str());
+        settings_.use_keyframe_input ? "keyframe input" : "", params.features.type.c_str(), width.c_str(),
+        worker_->extractionThread() ? ", extracted on a thread of their own" : "", params.candidates.exclusion_frames,
+        params.verification.enabled ? "on" : "off", robots_.front()->store->directory().c_str());
     const std::string cost = extractionCostWarning(settings_, params.features.type);
     if (!cost.empty()) NODELET_WARN("%s", cost.c_str());
   }

@@ -64,6 +64,11 @@ class DatabaseStore {
   mild::LoopDetector& detector(SharedDetector& shared) const { return shared.robot(robot_); }
   std::string& failure(SharedDetector& shared) const { return shared.failure.at(robot_); }
   std::string protectionNotice() const;  // why ~database_path is not saved to, and how to
+  // Reads `file` and prepares it without the lock, on an empty map of the robot's parameters (the
+  // maps, empty and fed a front-end's own descriptors, first take the file's width:
+  // RobotTeam::takeWidth); commit holds the lock and refuses a map whose width changed meanwhile.
+  mild::PreparedLoad prepare(SharedDetector& shared, const mild::ConfinedFile& file, bool continue_session);
+  void commit(SharedDetector& shared, mild::PreparedLoad&& prepared);  // hold the lock
 
   size_t robot_;
   mild::DatabaseDirectory directory_;
