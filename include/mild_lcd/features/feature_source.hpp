@@ -33,8 +33,8 @@ struct FeatureParams {
       "Feature extractor for image input, orb (256-bit descriptors), brisk (512) or akaze (486), whose descriptor "
       "width becomes the map's.");
     v("descriptor_bytes", p.descriptor_bytes, Bounds::in(kMinDescriptorBytes, kMaxDescriptorBytes).orZero(),
-      "Width of the stored descriptors in bytes, 0 (the extractor's) or 8 to 64; another width serves a "
-      "front-end's own Keyframe descriptors and refuses images.");
+      "Width of the stored descriptors in bytes, 0 (the extractor's, or a Keyframe-only node's first keyframe's) "
+      "or 8 to 64; another width serves a front-end's own Keyframe descriptors and refuses images.");
     v("reference_pixels", p.reference_pixels, Bounds::atLeast(0),
       "Image size in pixels (>= 0) that the extractors' num_features is meant for: other sizes scale it by "
       "sqrt(pixels / reference_pixels), at most 4 times, and 0 keeps it at any size.");
