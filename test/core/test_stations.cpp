@@ -317,15 +317,19 @@ TEST(StationLedger, HoldsLoopsByTheirContent) {
 }
 
 // Two stations as the link runs them (summaries taken in order by (station, run, number), loops
-// numbered per run, held by content, the ledger written at an autosave and after each loop),
-// alpha killed at every point of the run and restarted on its last saved ledger, its first 20
-// summaries after: every one is taken by charlie, no loop is published twice on either side, and
-// each names the keyframe it was decided on.
+// numbered per run, held by content, the ledger written at an autosave, and after each loop or
+// not), alpha killed at every point of the run and restarted on its last saved ledger, its first
+// 20 summaries after: every one is taken by charlie, no loop is published twice on either side,
+// and each names the keyframe it was decided on. Without the ledger written after each loop, what
+// keeps alpha from deciding again is charlie's summaries naming it (looped_by).
 TEST(StationLedger, ARestartAfterAKillAtAnyPointNeitherLosesNorRepeats) {
   constexpr uint64_t kCharlie = 100, kAlphaBefore = 30, kAlphaAfter = 20;
   const auto decides = [](uint64_t id) { return id % 5 != 1; };  // alpha finds a loop for most
   for (uint64_t kill = 0; kill <= kCharlie + kAlphaBefore; ++kill) {
-    for (uint64_t autosave : {uint64_t{0}, kill / 2, kill}) {
+    for (const std::pair<uint64_t, bool>& variant : std::vector<std::pair<uint64_t, bool>>{
+             {0, true}, {kill / 2, true}, {kill, true}, {0, false}, {kill / 2, false}}) {
+      const uint64_t autosave = variant.first;
+      const bool write_through = variant.second;
       StationLedger charlie("charlie", 1);
       auto alpha = std::make_unique<StationLedger>("alpha", 1);
       const uint64_t charlie_epoch = 11;
@@ -345,7 +349,7 @@ TEST(StationLedger, ARestartAfterAKillAtAnyPointNeitherLosesNorRepeats) {
         const std::vector<std::string> by = charlie.loopedBy("charlie", "robot5", 0, seq);
         if (std::find(by.begin(), by.end(), "alpha") != by.end() || alpha->holdsLoop(key) || !decides(seq)) return;
         alpha->keepLoop(key);
-        saved = alpha->toText();  // written through before it is published
+        if (write_through) saved = alpha->toText();  // before it is published
         ++published_alpha[key];
         const uint64_t number = alpha->nextLoopFor("charlie");
         if (charlie.loopRun("alpha", alpha_epoch) == PeerRuns::Seen::kPast) return;
@@ -382,12 +386,14 @@ TEST(StationLedger, ARestartAfterAKillAtAnyPointNeitherLosesNorRepeats) {
       for (uint64_t a = 0; a < kAlphaAfter; ++a) {
         charlieTakes(alpha->recordOwn(0, 1000 + a, static_cast<KeyframeIndex>(a)), true);
       }
-      EXPECT_EQ(charlie_took_after, kAlphaAfter) << "killed at " << kill << ", saved at " << autosave;
+      const std::string at = "killed at " + std::to_string(kill) + ", saved at " + std::to_string(autosave) +
+                             (write_through ? " and after each loop" : "");
+      EXPECT_EQ(charlie_took_after, kAlphaAfter) << at;
       for (uint64_t c = 0; c < kCharlie; ++c) {
         const LoopKey key{"charlie", "robot5", 0, c, "alpha"};
         const int expected = decides(c) ? 1 : 0;
-        EXPECT_EQ(published_alpha[key], expected) << "alpha, keyframe " << c << ", killed at " << kill;
-        EXPECT_EQ(published_charlie[key], expected) << "charlie, keyframe " << c << ", killed at " << kill;
+        EXPECT_EQ(published_alpha[key], expected) << "alpha, keyframe " << c << ", " << at;
+        EXPECT_EQ(published_charlie[key], expected) << "charlie, keyframe " << c << ", " << at;
       }
       EXPECT_EQ(published_alpha.size(), published_charlie.size());
     }
