@@ -824,9 +824,12 @@ std::map<std::tuple<std::string, std::string, uint32_t, uint64_t, std::string>, 
 // of alpha's numbered above it), before its next autosave; restarted on its folder: charlie takes
 // every summary of alpha's new run (none dropped as a copy), no loop is published twice on either
 // robot's loop_closure, and each names keyframes their stations answered for (station, session, id).
-TEST(TeamRestart, AStationKilledAndRestartedNeitherLosesSummariesNorRepeatsLoops) {
+// With `peer_stopped`, charlie is stopped (SIGSTOP) while alpha restarts and numbers its first
+// keyframes: alpha hears no heartbeat of charlie's before it numbers them.
+void killAndRestart(bool peer_stopped) {
   const char* home = std::getenv("ROS_HOME");
-  const fs::path root = fs::path(home && *home ? home : "/tmp") / "mild_team_restart_test";
+  const fs::path root = fs::path(home && *home ? home : "/tmp") /
+                        ("mild_team_restart_test" + std::string(peer_stopped ? "_stopped" : ""));
   fs::remove_all(root);
   fs::create_directories(root / "alpha");
   fs::create_directories(root / "charlie");
@@ -855,9 +858,16 @@ TEST(TeamRestart, AStationKilledAndRestartedNeitherLosesSummariesNorRepeatsLoops
   kill(alpha, SIGKILL);
   waitpid(alpha, nullptr, 0);
   const uint64_t old_epoch = lastOf(statuses, "alpha").epoch;
+  if (peer_stopped) kill(charlie, SIGSTOP);
   alpha = startSavingStation("/ta", "alpha", (root / "alpha").string());
-  ASSERT_TRUE(within(30.0, [&] { return lastOf(statuses, "alpha").epoch != old_epoch; }));
-  feed(sample, 0, 30, "/ta", false, true);  // charlie's places again: charlie decides their loops
+  EXPECT_TRUE(within(30.0, [&] { return lastOf(statuses, "alpha").epoch != old_epoch; }));
+  // charlie's places again (charlie decides their loops), the first 10 while charlie is stopped.
+  feed(sample, 0, 10, "/ta", false, true);
+  if (peer_stopped) {
+    ros::WallDuration(1.0).sleep();
+    kill(charlie, SIGCONT);
+  }
+  feed(sample, 10, 30, "/ta", false, true);
   // Every summary of alpha's new run taken by charlie.
   EXPECT_TRUE(within(30.0,
                      [&] {
@@ -915,6 +925,10 @@ TEST(TeamRestart, AStationKilledAndRestartedNeitherLosesSummariesNorRepeatsLoops
   waitpid(charlie, nullptr, 0);
   fs::remove_all(root);
 }
+
+TEST(TeamRestart, AStationKilledAndRestartedNeitherLosesSummariesNorRepeatsLoops) { killAndRestart(false); }
+
+TEST(TeamRestart, SoWhenItHearsNoHeartbeatOfItsPeerBeforeItNumbers) { killAndRestart(true); }
 
 }  // namespace
 }  // namespace mild_lcd::test
