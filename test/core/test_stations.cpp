@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <iostream>
 #include <map>
+#include <memory>
 #include <random>
 #include <set>
 #include <string>
@@ -242,6 +243,161 @@ TEST(StationLedger, KeepsWhatEachPeerAnnouncedAcrossARestart) {
   StationLedger from_older("alpha", 1);
   from_older.fromText(older.dump());
   EXPECT_FALSE(from_older.wasAnnounced("bravo", "b1", 0, 45));
+}
+
+// A station's runs: a peer keys what it took of a station by its run's epoch, so that a run after
+// a crash, numbering from the last saved ledger, is never taken for copies of the crashed run's;
+// a run it left is dropped. Each run numbers its loops from 0, and a peer counts them per run.
+TEST(StationLedger, APeerKeysWhatItTookByTheStationsRun) {
+  StationLedger alpha("alpha", 1);
+  EXPECT_EQ(alpha.summaryRun("charlie", 7, 0), PeerRuns::Seen::kNew);
+  for (int i = 0; i < 100; ++i) alpha.took("charlie");
+  EXPECT_EQ(alpha.summaryRun("charlie", 7, 0), PeerRuns::Seen::kCurrent);
+  // charlie crashed with 40 of its summaries in its saved ledger: its run 8 numbers from 40.
+  EXPECT_EQ(alpha.summaryRun("charlie", 8, 40), PeerRuns::Seen::kNew);
+  EXPECT_EQ(alpha.received("charlie"), 40u) << "the crashed run's 40 .. 99 are not this run's";
+  EXPECT_EQ(alpha.summaryRun("charlie", 7, 0), PeerRuns::Seen::kPast);
+  EXPECT_EQ(alpha.received("charlie"), 40u);
+  // A restart of a station behind: nothing it took goes back further than needed.
+  EXPECT_EQ(alpha.summaryRun("charlie", 9, 1000), PeerRuns::Seen::kNew);
+  EXPECT_EQ(alpha.received("charlie"), 40u);
+
+  alpha.tookLoop("charlie");
+  EXPECT_EQ(alpha.loopRun("charlie", 8), PeerRuns::Seen::kNew);
+  EXPECT_EQ(alpha.loopsReceivedFrom("charlie"), 0u);
+  alpha.tookLoop("charlie");
+  EXPECT_EQ(alpha.loopRun("charlie", 8), PeerRuns::Seen::kCurrent);
+  EXPECT_EQ(alpha.loopsReceivedFrom("charlie"), 1u);
+  EXPECT_EQ(alpha.loopEpoch("charlie"), 8u);
+
+  StationLedger again("alpha", 1);
+  again.fromText(alpha.toText());
+  EXPECT_EQ(again.toText(), alpha.toText());
+  EXPECT_EQ(again.summaryRun("charlie", 7, 0), PeerRuns::Seen::kPast) << "runs left are kept across a restart";
+  again.nextLoopFor("charlie");
+  const uint64_t epoch = StationLedger::drawEpoch();
+  EXPECT_NE(epoch, 0u);
+  again.beginRun(epoch);
+  EXPECT_EQ(again.epoch(), epoch);
+  EXPECT_EQ(again.loopsSentTo("charlie"), 0u) << "each run numbers its loops from 0";
+  EXPECT_NE(StationLedger::drawEpoch(), epoch);
+
+  PeerRuns runs;
+  for (uint64_t e = 1; e <= 100; ++e) EXPECT_EQ(runs.see(e), PeerRuns::Seen::kNew);
+  EXPECT_EQ(runs.past.size(), PeerRuns::kMaxPast);
+}
+
+// Loops are held by content, saved, bounded; a keyframe's summary names the deciders of the loops
+// held for it.
+TEST(StationLedger, HoldsLoopsByTheirContent) {
+  StationLedger charlie("charlie", 1);
+  const LoopKey key{"charlie", "robot5", 1, 45, "alpha"};
+  EXPECT_TRUE(charlie.keepLoop(key));
+  EXPECT_FALSE(charlie.keepLoop(key)) << "a copy";
+  EXPECT_TRUE(charlie.keepLoop({"charlie", "robot5", 1, 45, "bravo"}));
+  EXPECT_TRUE(charlie.keepLoop({"charlie", "robot5", 0, 45, "alpha"}));
+  EXPECT_EQ(charlie.loopedBy("charlie", "robot5", 1, 45), (std::vector<std::string>{"alpha", "bravo"}));
+  EXPECT_TRUE(charlie.loopedBy("charlie", "robot5", 2, 45).empty()) << "another session's keyframe 45";
+  StationLedger again("charlie", 1);
+  again.fromText(charlie.toText());
+  EXPECT_TRUE(again.holdsLoop(key));
+  EXPECT_FALSE(again.holdsLoop({"charlie", "robot6", 1, 45, "alpha"}));
+  for (uint64_t id = 0; id < StationLedger::kMaxLoopsKept; ++id) again.keepLoop({"charlie", "robot6", 0, id, "x"});
+  EXPECT_FALSE(again.holdsLoop(key)) << "the oldest go beyond the bound";
+  EXPECT_TRUE(again.holdsLoop({"charlie", "robot6", 0, 0, "x"}));
+
+  nlohmann::json older = nlohmann::json::parse(charlie.toText());
+  older.erase("loops_kept");
+  older.erase("summary_runs");
+  older.erase("loop_runs");
+  older.erase("epoch");
+  StationLedger from_older("charlie", 1);
+  from_older.fromText(older.dump());
+  EXPECT_FALSE(from_older.holdsLoop(key));
+}
+
+// Two stations as the link runs them (summaries taken in order by (station, run, number), loops
+// numbered per run, held by content, the ledger written at an autosave, and after each loop or
+// not), alpha killed at every point of the run and restarted on its last saved ledger, its first
+// 20 summaries after: every one is taken by charlie, no loop is published twice on either side,
+// and each names the keyframe it was decided on. Without the ledger written after each loop, what
+// keeps alpha from deciding again is charlie's summaries naming it (looped_by).
+TEST(StationLedger, ARestartAfterAKillAtAnyPointNeitherLosesNorRepeats) {
+  constexpr uint64_t kCharlie = 100, kAlphaBefore = 30, kAlphaAfter = 20;
+  const auto decides = [](uint64_t id) { return id % 5 != 1; };  // alpha finds a loop for most
+  for (uint64_t kill = 0; kill <= kCharlie + kAlphaBefore; ++kill) {
+    for (const std::pair<uint64_t, bool>& variant : std::vector<std::pair<uint64_t, bool>>{
+             {0, true}, {kill / 2, true}, {kill, true}, {0, false}, {kill / 2, false}}) {
+      const uint64_t autosave = variant.first;
+      const bool write_through = variant.second;
+      StationLedger charlie("charlie", 1);
+      auto alpha = std::make_unique<StationLedger>("alpha", 1);
+      const uint64_t charlie_epoch = 11;
+      charlie.beginRun(charlie_epoch);
+      uint64_t alpha_epoch = 21;
+      alpha->beginRun(alpha_epoch);
+      std::string saved;  // alpha's ledger as last written
+      std::map<LoopKey, int> published_alpha, published_charlie;
+      uint64_t charlie_took_after = 0;
+      // charlie's summary `seq` (robot5's keyframe seq of session 0), with the deciders of the
+      // loops charlie holds for it, taken by alpha in order.
+      const auto alphaTakes = [&](uint64_t seq) {
+        if (alpha->summaryRun("charlie", charlie_epoch, 0) == PeerRuns::Seen::kPast) return;
+        if (seq != alpha->received("charlie")) return;
+        alpha->took("charlie");
+        const LoopKey key{"charlie", "robot5", 0, seq, "alpha"};
+        const std::vector<std::string> by = charlie.loopedBy("charlie", "robot5", 0, seq);
+        if (std::find(by.begin(), by.end(), "alpha") != by.end() || alpha->holdsLoop(key) || !decides(seq)) return;
+        alpha->keepLoop(key);
+        if (write_through) saved = alpha->toText();  // before it is published
+        ++published_alpha[key];
+        const uint64_t number = alpha->nextLoopFor("charlie");
+        if (charlie.loopRun("alpha", alpha_epoch) == PeerRuns::Seen::kPast) return;
+        if (number != charlie.loopsReceivedFrom("alpha")) return;
+        charlie.tookLoop("alpha");
+        if (charlie.keepLoop(key)) ++published_charlie[key];
+      };
+      const auto charlieTakes = [&](uint64_t seq, bool after) {
+        if (charlie.summaryRun("alpha", alpha->epoch(), alpha->runStart()) == PeerRuns::Seen::kPast) return;
+        if (seq < charlie.received("alpha")) return;  // a copy
+        ASSERT_EQ(seq, charlie.received("alpha"));
+        charlie.took("alpha");
+        if (after) ++charlie_took_after;
+      };
+      uint64_t step = 0;
+      for (uint64_t c = 0, a = 0; c < kCharlie || a < kAlphaBefore; ++step) {
+        if (step == autosave) saved = alpha->toText();
+        if (step == kill) break;
+        if (a < kAlphaBefore && (c >= kCharlie || step % 4 == 0)) {
+          charlieTakes(alpha->recordOwn(0, a, static_cast<KeyframeIndex>(a)), false);
+          ++a;
+        } else {
+          alphaTakes(c++);
+        }
+      }
+      // SIGKILL: alpha restarts on its folder, a new run.
+      alpha = std::make_unique<StationLedger>("alpha", 1);
+      if (!saved.empty()) alpha->fromText(saved);
+      alpha->forgetBeyond(0, 0);
+      alpha_epoch = 22;
+      alpha->beginRun(alpha_epoch);
+      // It asks charlie for what it misses (charlie's summaries carry the deciders of its loops).
+      for (uint64_t c = alpha->received("charlie"); c < kCharlie; ++c) alphaTakes(c);
+      for (uint64_t a = 0; a < kAlphaAfter; ++a) {
+        charlieTakes(alpha->recordOwn(0, 1000 + a, static_cast<KeyframeIndex>(a)), true);
+      }
+      const std::string at = "killed at " + std::to_string(kill) + ", saved at " + std::to_string(autosave) +
+                             (write_through ? " and after each loop" : "");
+      EXPECT_EQ(charlie_took_after, kAlphaAfter) << at;
+      for (uint64_t c = 0; c < kCharlie; ++c) {
+        const LoopKey key{"charlie", "robot5", 0, c, "alpha"};
+        const int expected = decides(c) ? 1 : 0;
+        EXPECT_EQ(published_alpha[key], expected) << "alpha, keyframe " << c << ", " << at;
+        EXPECT_EQ(published_charlie[key], expected) << "charlie, keyframe " << c << ", " << at;
+      }
+      EXPECT_EQ(published_alpha.size(), published_charlie.size());
+    }
+  }
 }
 
 // The team key's MAC is HMAC-SHA256 (RFC 4231, test case 6: a key longer than SHA-256's block), and

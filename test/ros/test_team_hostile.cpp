@@ -1,6 +1,7 @@
 // A station of a team across hosts against a hostile peer (test/ros/team_hostile.test): the test
 // is station "mallory". What it sends that the station cannot take is refused and counted, and the
-// station's own robot is answered as fast while it floods the station.
+// station's own robot is answered as fast while it floods the station. Then (test/ros/team_restart.test)
+// two stations of its own, one killed and restarted.
 
 #include <gtest/gtest.h>
 
@@ -17,6 +18,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -26,7 +28,10 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <random>
+#include <set>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "mild_lcd/Keyframe.h"
@@ -210,7 +215,8 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
 // Claims no honest peer can make: that it holds 2^62 of the station's summaries (numbering past them
 // once meant a ledger entry each, under the detector's lock) and that it can no longer send its
 // first 2^62 loops for the station (skipping them once took a step each: the station stalled); then
-// claims that are each plausible but together more than a run can skip (a million numbers);
+// claims of holding more of its summaries than it numbered (no claim moves its numbering: each run
+// has an epoch, and peers key what they took by it);
 // and a summary whose names are a megabyte (held ahead of a gap, 144 of them per invented peer name
 // could hold gigabytes). Each is refused and counted; the station's own robot keeps being answered.
 // (Runs after the test above, with the station's 150 keyframes stored.)
@@ -269,16 +275,16 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   ros::WallDuration(0.5).sleep();
   store(10);  // 160 numbered
   claim(160 + 5000, 0);
-  store(5);  // 5000 skipped (a restart's worth), 5165 numbered
-  claim(5165 + 1000000, 0);
-  store(5);                        // 1,005,000 in all would be more than a run can skip: refused, 5170 numbered
+  store(5);  // 165 numbered: a claim moves nothing
+  claim(165 + 1000000, 0);
+  store(5);                        // 170 numbered
   ros::WallDuration(2.5).sleep();  // its next heartbeats
   mild_lcd::TeamStatus last;
   for (const auto& s : statuses.messages()) {
     if (s.station == "alpha") last = s;
   }
   ASSERT_EQ(last.station, "alpha");
-  EXPECT_EQ(last.summaries, 5170u) << "the station numbered its keyframes past a peer's false claims";
+  EXPECT_EQ(last.summaries, 170u) << "a peer's claim moved the station's numbering";
   for (size_t i = 0; i < last.peers.size(); ++i) {
     if (last.peers[i] != "mallory") continue;
     EXPECT_LT(last.loops_received[i], 1000u) << "a false claim of lost loops was taken";
@@ -733,6 +739,196 @@ TEST(TeamKey, AStationWithAKeyRefusesEveryMessageWithoutIt) {
   waitpid(node, &status, 0);
   fs::remove_all(root);
 }
+
+// --- a station killed and restarted (test/ros/team_restart.test) ---
+
+// The last heartbeat of `station` in `statuses`, or one with an empty name.
+mild_lcd::TeamStatus lastOf(const TopicLog<mild_lcd::TeamStatus>& statuses, const std::string& station) {
+  mild_lcd::TeamStatus last;
+  for (const auto& s : statuses.messages()) {
+    if (s.station == station) last = s;
+  }
+  return last;
+}
+
+uint64_t receivedFrom(const mild_lcd::TeamStatus& s, const std::string& peer) {
+  for (size_t i = 0; i < s.peers.size(); ++i) {
+    if (s.peers[i] == peer) return s.received[i];
+  }
+  return 0;
+}
+
+// A station of one robot in `ns` (its maps and ledger in `folder`, saved every 15 s).
+pid_t startSavingStation(const std::string& ns, const std::string& station, const std::string& folder) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const std::string ns_arg = "__ns:=" + ns, station_arg = "_team/station:=" + station,
+                      dir_arg = "_database_dir:=" + folder, path_arg = "_database_path:=" + station + ".mild";
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", station_arg.c_str(), dir_arg.c_str(),
+          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_autosave_period:=15",
+          "_use_image_input:=false", "_queue_size:=300", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+// Publishes keyframes [first, last) in `ns` at 10 Hz; with `noise`, their descriptors random (they
+// close no loop); with `later`, 1000 s later and with new ids (the same places again).
+void feed(const std::vector<mild_lcd::Keyframe>& sample, size_t first, size_t last, const std::string& ns,
+          bool noise = false, bool later = false) {
+  std::mt19937 random(static_cast<unsigned>(first));
+  ros::NodeHandle nh;
+  ros::Publisher pub = nh.advertise<mild_lcd::Keyframe>(ns + "/keyframe", 1000);
+  ASSERT_TRUE(waitForSubscriber(pub, 30.0));
+  for (size_t i = first; i < last; ++i) {
+    mild_lcd::Keyframe k = sample[i];
+    if (later) {
+      k.id += 1000000;
+      k.header.stamp += ros::Duration(1000.0);
+    }
+    if (noise) {
+      for (auto& byte : k.descriptors) byte = static_cast<uint8_t>(random());
+    }
+    pub.publish(k);
+    ros::WallDuration(0.1).sleep();
+  }
+}
+
+// Waits up to `seconds` for `done`.
+bool within(double seconds, const std::function<bool()>& done) {
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(seconds);
+  while (!done()) {
+    if (ros::WallTime::now() > end) return false;
+    ros::WallDuration(0.1).sleep();
+  }
+  return true;
+}
+
+// Team loops published on a robot's loop_closure, by (query station, robot, session, id, decider).
+std::map<std::tuple<std::string, std::string, uint32_t, uint64_t, std::string>, int> teamLoops(
+    const std::vector<mild_lcd::LoopClosure>& published) {
+  std::map<std::tuple<std::string, std::string, uint32_t, uint64_t, std::string>, int> loops;
+  for (const auto& m : published) {
+    for (const auto& c : m.candidates) {
+      if (c.station.empty() || c.station == m.query_station) continue;
+      ++loops[{m.query_station, m.query_robot, m.query_session, m.query_id, c.station}];
+      break;
+    }
+  }
+  return loops;
+}
+
+// Station alpha, its keyframes autosaved, then killed (SIGKILL) after it took charlie's summaries and
+// decided their loops (alpha's keyframes came first), took charlie's loops for its next keyframes,
+// and stored keyframes that close no loop (after its ledger's last write: charlie holds summaries
+// of alpha's numbered above it), before its next autosave; restarted on its folder: charlie takes
+// every summary of alpha's new run (none dropped as a copy), no loop is published twice on either
+// robot's loop_closure, and each names keyframes their stations answered for (station, session, id).
+// With `peer_stopped`, charlie is stopped (SIGSTOP) while alpha restarts and numbers its first
+// keyframes: alpha hears no heartbeat of charlie's before it numbers them.
+void killAndRestart(bool peer_stopped) {
+  const char* home = std::getenv("ROS_HOME");
+  const fs::path root = fs::path(home && *home ? home : "/tmp") /
+                        ("mild_team_restart_test" + std::string(peer_stopped ? "_stopped" : ""));
+  fs::remove_all(root);
+  fs::create_directories(root / "alpha");
+  fs::create_directories(root / "charlie");
+  const std::vector<mild_lcd::Keyframe> sample = sampleKeyframes();
+  ASSERT_GE(sample.size(), 60u);
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status", 100000);
+  TopicLog<mild_lcd::LoopClosure> at_alpha("/ta/loop_closure", 100000), at_charlie("/tc/loop_closure", 100000);
+  const pid_t charlie = startSavingStation("/tc", "charlie", (root / "charlie").string());
+  pid_t alpha = startSavingStation("/ta", "alpha", (root / "alpha").string());
+  ASSERT_TRUE(at_alpha.waitForPublisher(30.0) && at_charlie.waitForPublisher(30.0));
+  const ros::WallTime started = ros::WallTime::now();
+  ASSERT_TRUE(within(20.0, [&] { return !lastOf(statuses, "alpha").station.empty(); }));
+  feed(sample, 0, 40, "/ta");
+  ASSERT_TRUE(within(30.0, [&] { return receivedFrom(lastOf(statuses, "charlie"), "alpha") == 40; }));
+  // alpha's first autosave (15 s after its start): its 40 keyframes, none of charlie's summaries.
+  ros::WallDuration(std::max(0.5, 16.0 - (ros::WallTime::now() - started).toSec())).sleep();
+  feed(sample, 0, 60, "/tc");
+  ASSERT_TRUE(within(30.0, [&] { return receivedFrom(lastOf(statuses, "alpha"), "charlie") == 60; }));
+  feed(sample, 40, 50, "/ta");        // charlie's keyframes came first: charlie decides their loops
+  ros::WallDuration(2.0).sleep();     // pulls answered, loops decided and acknowledged
+  feed(sample, 50, 60, "/ta", true);  // no loop: no write of alpha's ledger after them
+  ASSERT_TRUE(within(30.0, [&] { return receivedFrom(lastOf(statuses, "charlie"), "alpha") == 60; }));
+  const size_t loops_before = teamLoops(at_alpha.messages()).size() + teamLoops(at_charlie.messages()).size();
+  EXPECT_GT(loops_before, 10u) << "loops between the stations before the kill";
+
+  kill(alpha, SIGKILL);
+  waitpid(alpha, nullptr, 0);
+  const uint64_t old_epoch = lastOf(statuses, "alpha").epoch;
+  if (peer_stopped) kill(charlie, SIGSTOP);
+  alpha = startSavingStation("/ta", "alpha", (root / "alpha").string());
+  EXPECT_TRUE(within(30.0, [&] { return lastOf(statuses, "alpha").epoch != old_epoch; }));
+  // charlie's places again (charlie decides their loops), the first 10 while charlie is stopped.
+  feed(sample, 0, 10, "/ta", false, true);
+  if (peer_stopped) {
+    ros::WallDuration(1.0).sleep();
+    kill(charlie, SIGCONT);
+  }
+  feed(sample, 10, 30, "/ta", false, true);
+  // Every summary of alpha's new run taken by charlie.
+  EXPECT_TRUE(within(30.0,
+                     [&] {
+                       const mild_lcd::TeamStatus a = lastOf(statuses, "alpha");
+                       return receivedFrom(lastOf(statuses, "charlie"), "alpha") == a.summaries &&
+                              a.summaries > a.epoch_start;
+                     }))
+      << "charlie took " << receivedFrom(lastOf(statuses, "charlie"), "alpha") << " of alpha's "
+      << lastOf(statuses, "alpha").summaries << " summaries";
+  ros::WallDuration(5.0).sleep();  // alpha takes charlie's summaries again; loops, if any, published
+  // The loops of alpha's new keyframes at charlie's first 30 places, decided by charlie, as many as
+  // of charlie's first 30 decided by alpha before the kill (a summary dropped as a copy has none).
+  uint32_t new_session = 0;
+  for (const auto& m : at_alpha.messages()) {
+    if (m.query_station == "alpha") new_session = std::max(new_session, m.query_session);
+  }
+  size_t before = 0, again = 0;
+  for (const auto& [key, count] : teamLoops(at_alpha.messages())) {
+    const auto& [station, robot, session, id, decider] = key;
+    if (station == "charlie" && id < 30) ++before;
+    if (station == "alpha" && session == new_session && new_session > 0 && decider == "charlie") ++again;
+  }
+  EXPECT_GE(again + 3, before) << "charlie decided " << again << " loops of alpha's new run at its first 30 places, "
+                               << "alpha " << before << " before the kill";
+  const mild_lcd::TeamStatus after = lastOf(statuses, "alpha");
+  EXPECT_LT(after.epoch_start, 60u) << "the kill came before charlie held summaries alpha's ledger had not numbered";
+  std::cout << "team loops before the kill " << loops_before << ", after the restart "
+            << teamLoops(at_alpha.messages()).size() + teamLoops(at_charlie.messages()).size()
+            << "; alpha's new run numbers from " << after.epoch_start << ", took " << receivedFrom(after, "charlie")
+            << " of charlie's summaries; at charlie's first 30 places " << before << " loops before, " << again
+            << " after" << std::endl;
+
+  // Each keyframe a station answered for: (station, session, id).
+  std::set<std::tuple<std::string, uint32_t, uint64_t>> stored;
+  for (const auto& m : at_alpha.messages()) stored.emplace(m.query_station, m.query_session, m.query_id);
+  for (const auto& m : at_charlie.messages()) stored.emplace(m.query_station, m.query_session, m.query_id);
+  for (const auto* log : {&at_alpha, &at_charlie}) {
+    const std::vector<mild_lcd::LoopClosure> published = log->messages();
+    for (const auto& [key, count] : teamLoops(published)) {
+      EXPECT_EQ(count, 1) << "published " << count << " times: the loop of " << std::get<0>(key) << "'s keyframe "
+                          << std::get<3>(key) << " (session " << std::get<2>(key) << ") decided by "
+                          << std::get<4>(key);
+    }
+    for (const auto& m : published) {
+      for (const auto& c : m.candidates) {
+        if (c.station.empty() || c.station == m.query_station) continue;
+        EXPECT_TRUE(stored.count({m.query_station, m.query_session, m.query_id}) > 0) << "an unknown query";
+        EXPECT_TRUE(stored.count({c.station, c.session, c.id}) > 0) << "an unknown candidate";
+      }
+    }
+  }
+  kill(alpha, SIGINT);
+  kill(charlie, SIGINT);
+  waitpid(alpha, nullptr, 0);
+  waitpid(charlie, nullptr, 0);
+  fs::remove_all(root);
+}
+
+TEST(TeamRestart, AStationKilledAndRestartedNeitherLosesSummariesNorRepeatsLoops) { killAndRestart(false); }
+
+TEST(TeamRestart, SoWhenItHearsNoHeartbeatOfItsPeerBeforeItNumbers) { killAndRestart(true); }
 
 }  // namespace
 }  // namespace mild_lcd::test

@@ -13,10 +13,17 @@
 //   was down, or within one message's flight) the station whose name sorts first decides. Every
 //   pair is thus decided by exactly one station, whatever the order summaries arrive in.
 // - Loops it decided for a peer's keyframes are numbered per peer and kept until acknowledged.
+// - Each run of a station draws a random epoch (beginRun), carried in its messages: a peer keys what
+//   it took of a station by (station, epoch, number), so that a run after a crash, numbering from
+//   its last saved ledger, never collides with what the crashed run gave (summaryRun, loopRun).
+// - Loops are held by content (the query's station, robot, session and id, and the decider): a loop
+//   decided again after a crash is a copy whatever its number, and a peer's summary names the
+//   stations whose loop for it it holds, so that they do not decide it again (loopedBy).
 // It is saved beside the maps so that a restarted station neither re-sends nor re-asks.
 
 #include <cstddef>
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <optional>
 #include <set>
@@ -27,6 +34,26 @@
 #include "mild_lcd/team/place_summary.hpp"
 
 namespace mild {
+
+// The runs (epochs) of a peer as heard: the current one and the few before it.
+struct PeerRuns {
+  enum class Seen { kCurrent, kNew, kPast };
+  static constexpr size_t kMaxPast = 16;
+  std::optional<uint64_t> current;
+  std::vector<uint64_t> past;  // oldest first
+  // kNew the first time `epoch` is heard (it becomes current, the one before past); kPast for a run
+  // it left (its messages were sent before the restart: dropped).
+  Seen see(uint64_t epoch);
+};
+
+// A loop as held, by content: its query (its station, robot, session and id) and its decider.
+struct LoopKey {
+  std::string station, robot;
+  uint32_t session = 0;
+  uint64_t id = 0;
+  std::string decider;
+  bool operator<(const LoopKey& o) const;
+};
 
 // A station's name: 1 to 32 characters of [a-z0-9_], starting with a letter (it names ROS topics).
 bool validStationName(const std::string& name);
@@ -93,6 +120,30 @@ class StationLedger {
   // Counts peer's loops below `count` as taken (the decider can no longer send them: lost), at once.
   void skipLoopsReceivedTo(const std::string& peer, uint64_t count);
 
+  // This station's run: a random epoch (drawEpoch) begun at start-up. Summaries numbered from
+  // runStart() on are this run's; its loops are numbered from 0 per peer again.
+  static uint64_t drawEpoch();
+  void beginRun(uint64_t epoch);
+  uint64_t epoch() const { return epoch_; }
+  uint64_t runStart() const { return run_start_; }
+  // A peer's summary of its run `epoch`, which began numbering at `start`. A new run: what was taken
+  // of its summaries numbered from `start` on was an earlier run's (lost with it), so the count goes
+  // back to `start` and they are taken again, this run's. kPast: a run it left (dropped).
+  PeerRuns::Seen summaryRun(const std::string& peer, uint64_t epoch, uint64_t start);
+  // A peer's loop of its run `epoch`: a new run numbers its loops from 0 again.
+  PeerRuns::Seen loopRun(const std::string& peer, uint64_t epoch);
+  PeerRuns summaryRuns(const std::string& peer) const;
+  uint64_t loopEpoch(const std::string& peer) const;  // 0 when none heard
+
+  // Loops held (published here, this station's or a peer's), by content: the last kMaxLoopsKept.
+  static constexpr size_t kMaxLoopsKept = 100000;
+  bool holdsLoop(const LoopKey& key) const { return loops_kept_.count(key) > 0; }
+  // False, changing nothing, when held already.
+  bool keepLoop(const LoopKey& key);
+  // The deciders of the loops held for station's robot's keyframe `id` of `session`.
+  std::vector<std::string> loopedBy(const std::string& station, const std::string& robot, uint32_t session,
+                                    uint64_t id) const;
+
   // The ledger as text (JSON), and back. fromText throws InvalidInput for text that is not a
   // ledger of this station with this many robots, changing nothing.
   std::string toText() const;
@@ -114,6 +165,11 @@ class StationLedger {
   std::map<std::string, uint64_t> loops_received_;               // per peer
   using KeyframeKeys = std::set<std::pair<uint32_t, uint64_t>>;  // (session, id)
   std::map<std::string, std::map<std::string, KeyframeKeys>> announced_;  // per peer, per robot of it
+  uint64_t epoch_ = 0;
+  uint64_t run_start_ = 0;
+  std::map<std::string, PeerRuns> summary_runs_, loop_runs_;  // per peer
+  std::set<LoopKey> loops_kept_;
+  std::deque<LoopKey> loops_order_;  // loops_kept_ as kept, oldest first
 };
 
 }  // namespace mild

@@ -1,6 +1,8 @@
 #include "mild_lcd/team/station_ledger.hpp"
 
 #include <algorithm>
+#include <random>
+#include <tuple>
 
 #include <nlohmann/json.hpp>
 
@@ -12,6 +14,19 @@ bool validStationName(const std::string& name) {
   if (name.empty() || name.size() > 32 || !(name[0] >= 'a' && name[0] <= 'z')) return false;
   return std::all_of(name.begin(), name.end(),
                      [](char c) { return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_'; });
+}
+
+PeerRuns::Seen PeerRuns::see(uint64_t epoch) {
+  if (current == epoch) return Seen::kCurrent;
+  if (std::find(past.begin(), past.end(), epoch) != past.end()) return Seen::kPast;
+  if (current) past.push_back(*current);
+  if (past.size() > kMaxPast) past.erase(past.begin());
+  current = epoch;
+  return Seen::kNew;
+}
+
+bool LoopKey::operator<(const LoopKey& o) const {
+  return std::tie(station, robot, session, id, decider) < std::tie(o.station, o.robot, o.session, o.id, o.decider);
 }
 
 StationLedger::StationLedger(std::string station, size_t robots)
@@ -139,6 +154,87 @@ void StationLedger::skipLoopsReceivedTo(const std::string& peer, uint64_t count)
   received = std::max(received, count);
 }
 
+uint64_t StationLedger::drawEpoch() {
+  std::random_device device;
+  uint64_t epoch = 0;
+  while (epoch == 0) epoch = (uint64_t{device()} << 32) ^ device();  // 0: a message of no run
+  return epoch;
+}
+
+void StationLedger::beginRun(uint64_t epoch) {
+  epoch_ = epoch;
+  run_start_ = own_.size();
+  loops_sent_.clear();  // each run numbers its loops from 0: peers key them by its epoch
+}
+
+PeerRuns::Seen StationLedger::summaryRun(const std::string& peer, uint64_t epoch, uint64_t start) {
+  const PeerRuns::Seen seen = summary_runs_[peer].see(epoch);
+  if (seen == PeerRuns::Seen::kNew) {
+    uint64_t& count = received_[peer];
+    count = std::min(count, start);
+  }
+  return seen;
+}
+
+PeerRuns::Seen StationLedger::loopRun(const std::string& peer, uint64_t epoch) {
+  const PeerRuns::Seen seen = loop_runs_[peer].see(epoch);
+  if (seen == PeerRuns::Seen::kNew) loops_received_[peer] = 0;
+  return seen;
+}
+
+PeerRuns StationLedger::summaryRuns(const std::string& peer) const {
+  const auto it = summary_runs_.find(peer);
+  return it == summary_runs_.end() ? PeerRuns{} : it->second;
+}
+
+uint64_t StationLedger::loopEpoch(const std::string& peer) const {
+  const auto it = loop_runs_.find(peer);
+  return it == loop_runs_.end() ? 0 : it->second.current.value_or(0);
+}
+
+bool StationLedger::keepLoop(const LoopKey& key) {
+  if (!loops_kept_.insert(key).second) return false;
+  loops_order_.push_back(key);
+  if (loops_order_.size() > kMaxLoopsKept) {
+    loops_kept_.erase(loops_order_.front());
+    loops_order_.pop_front();
+  }
+  return true;
+}
+
+std::vector<std::string> StationLedger::loopedBy(const std::string& station, const std::string& robot, uint32_t session,
+                                                 uint64_t id) const {
+  std::vector<std::string> deciders;
+  const LoopKey first{station, robot, session, id, ""};
+  for (auto it = loops_kept_.lower_bound(first); it != loops_kept_.end() && it->station == station &&
+                                                 it->robot == robot && it->session == session && it->id == id;
+       ++it) {
+    deciders.push_back(it->decider);
+  }
+  return deciders;
+}
+
+namespace {
+
+nlohmann::json runsToJson(const std::map<std::string, PeerRuns>& runs) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& [peer, r] : runs) j[peer] = {{"current", r.current.value_or(0)}, {"past", r.past}};
+  return j;
+}
+
+std::map<std::string, PeerRuns> runsFromJson(const nlohmann::json& j) {
+  std::map<std::string, PeerRuns> runs;
+  for (const auto& [peer, r] : j.items()) {
+    PeerRuns& runs_of = runs[peer];
+    runs_of.current = r.at("current").get<uint64_t>();
+    runs_of.past = r.at("past").get<std::vector<uint64_t>>();
+    if (runs_of.past.size() > PeerRuns::kMaxPast) throw InvalidInput("the ledger keeps too many runs of a peer");
+  }
+  return runs;
+}
+
+}  // namespace
+
 std::string StationLedger::toText() const {
   nlohmann::json j;
   j["format"] = "mild_lcd station ledger 1";
@@ -160,6 +256,12 @@ std::string StationLedger::toText() const {
   j["loops_sent"] = loops_sent_;
   j["loops_received"] = loops_received_;
   j["announced"] = announced_;
+  j["epoch"] = epoch_;
+  j["summary_runs"] = runsToJson(summary_runs_);
+  j["loop_runs"] = runsToJson(loop_runs_);
+  nlohmann::json kept = nlohmann::json::array();
+  for (const LoopKey& k : loops_order_) kept.push_back({k.station, k.robot, k.session, k.id, k.decider});
+  j["loops_kept"] = std::move(kept);
   return j.dump();
 }
 
@@ -202,12 +304,34 @@ void StationLedger::fromText(const std::string& text) {
     // a peer's loop naming a keyframe it announced before is refused (counted).
     std::map<std::string, std::map<std::string, KeyframeKeys>> announced;
     if (j.contains("announced")) announced = j.at("announced").get<decltype(announced)>();
+    // Absent from ledgers written before runs and loops were kept: no peer's run known (the first
+    // heard is new), no loop held.
+    std::map<std::string, PeerRuns> summary_runs, loop_runs;
+    if (j.contains("summary_runs")) summary_runs = runsFromJson(j.at("summary_runs"));
+    if (j.contains("loop_runs")) loop_runs = runsFromJson(j.at("loop_runs"));
+    std::set<LoopKey> loops_kept;
+    std::deque<LoopKey> loops_order;
+    if (j.contains("loops_kept")) {
+      for (const auto& k : j.at("loops_kept")) {
+        LoopKey key{k.at(0).get<std::string>(), k.at(1).get<std::string>(), k.at(2).get<uint32_t>(),
+                    k.at(3).get<uint64_t>(), k.at(4).get<std::string>()};
+        if (loops_kept.insert(key).second) loops_order.push_back(std::move(key));
+      }
+      if (loops_order.size() > kMaxLoopsKept) throw InvalidInput("the ledger keeps too many loops");
+    }
+    const uint64_t epoch = j.contains("epoch") ? j.at("epoch").get<uint64_t>() : 0;
     own_ = std::move(own);
     numbered_ = std::move(numbered);
     received_ = std::move(received);
     loops_sent_ = std::move(loops_sent);
     loops_received_ = std::move(loops_received);
     announced_ = std::move(announced);
+    summary_runs_ = std::move(summary_runs);
+    loop_runs_ = std::move(loop_runs);
+    loops_kept_ = std::move(loops_kept);
+    loops_order_ = std::move(loops_order);
+    epoch_ = epoch;  // the run that saved it, until beginRun
+    run_start_ = own_.size();
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(std::string("the station ledger is malformed: ") + e.what());
   }

@@ -40,16 +40,11 @@ constexpr size_t kMaxResendsPerTick = 50;
 // Loops kept for a peer until it acknowledges them; beyond, its summaries wait.
 constexpr size_t kMaxUnacknowledged = 10000;
 // A count of loops no run reaches (one a microsecond for 146,000 years): a peer claiming one (as
-// taken, or as the lowest it can still send) is refused. Below it, a claim moves only the claiming
-// peer's numbering, at once (StationLedger::skipLoopsTo, skipLoopsReceivedTo): a station restarted
-// without its saved ledger (the default: ~save_on_shutdown off) starts from 0 and learns from its
-// peers' heartbeats where numbering stands, however far that is.
+// taken, or as the lowest it can still send) is refused. Below it, a peer's claim of the lowest
+// loop it can still send moves only the count of that peer's loops taken here, at once
+// (StationLedger::skipLoopsReceivedTo). No claim moves this station's own numbering: each run has
+// an epoch, and peers key what they took by it (StationLedger::summaryRun, loopRun).
 constexpr uint64_t kAbsurdCount = uint64_t{1} << 62;
-// This station's summary numbers skipped because peers hold them (a restart without the saved
-// ledger, or a crash after the last save), in all over a run: each is a ledger entry (about 64
-// bytes) made under the detector's lock. A run of up to a million keyframes restarts whole; a claim
-// beyond is refused (a false claim of 2^62 grew the ledger until memory ran out).
-constexpr uint64_t kMaxSummariesSkipped = 1000000;
 // A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
 // most kMaxPeers + 1 of each list), counts and fixed fields.
 constexpr size_t kMaxSummaryOverheadBytes = 16384;
@@ -126,6 +121,11 @@ std::vector<std::string> wireNames(std::vector<std::string> names, const std::st
     if (n.empty()) n = station;
   }
   return names;
+}
+
+// A loop as held (StationLedger::keepLoop): its query as named, and its decider.
+mild::LoopKey heldAs(const mild_lcd::LoopClosure& loop, const std::string& decider) {
+  return {loop.query_station, loop.query_robot, loop.query_session, loop.query_id, decider};
 }
 
 mild::PlaceSummary coreSummary(const mild_lcd::PlaceSummary& msg) {
@@ -230,9 +230,15 @@ void TeamLink::start() {
   }
   {
     const auto lock = shared_.lock();
+    // A run of its own: what peers took of earlier runs (a crash's included) never collides with it.
+    ledger_.beginRun(mild::StationLedger::drawEpoch());
+    epoch_ = ledger_.epoch();
     std::lock_guard<std::mutex> guard(mutex_);
     for (const std::string& name : ledger_.peers()) {
-      if (Peer* p = peer(name)) p->taken = ledger_.received(name);
+      if (Peer* p = peer(name)) {
+        p->taken = ledger_.received(name);
+        p->runs = ledger_.summaryRuns(name);
+      }
     }
   }
   const std::string& me = settings_.team_station;
@@ -306,6 +312,15 @@ void TeamLink::save() {
   mild::fileAtPath(ledger_path_).replace([&text](int fd) { writeWhole(fd, text); }, kLedgerSignature);
 }
 
+void TeamLink::persist() {
+  if (!settings_.save_on_shutdown) return;
+  try {
+    save();
+  } catch (const std::exception& e) {
+    ROS_WARN_STREAM_THROTTLE(10.0, "team link: could not save the station ledger after a loop: " << e.what());
+  }
+}
+
 // --- this station's keyframes ---
 
 void TeamLink::stored(const mild::DetectionResult& result) {
@@ -316,30 +331,6 @@ void TeamLink::stored(const mild::DetectionResult& result) {
     for (const auto& [name, p] : peers_) {
       if (p.seen && !connected(p)) unreachable.push_back(name);
     }
-  }
-  // A peer that took more of our summaries than we numbered (this station crashed after its last
-  // save): the lost numbers are skipped, or the peer would take our next keyframes for copies.
-  uint64_t held = 0;
-  {
-    std::lock_guard<std::mutex> guard(mutex_);
-    for (auto& [name, p] : peers_) {
-      if (p.holds_ours > ledger_.ownCount() + (kMaxSummariesSkipped - summaries_skipped_)) {
-        ROS_WARN_STREAM_THROTTLE(10.0, "team link: peer '" << name << "' claims " << p.holds_ours
-                                                           << " of this station's summaries, which numbered "
-                                                           << ledger_.ownCount() << "; refused");
-        ++p.refused;
-        p.holds_ours = 0;
-        continue;
-      }
-      held = std::max(held, p.holds_ours);
-    }
-  }
-  if (held > ledger_.ownCount()) {
-    ROS_WARN_STREAM("team link: peers hold " << held << " of this station's summaries, its ledger "
-                                             << ledger_.ownCount() << " (a crash after the last save): numbering from "
-                                             << held);
-    summaries_skipped_ += held - ledger_.ownCount();
-    ledger_.skipTo(held);
   }
   const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
   const mild_lcd::PlaceSummary::Ptr msg = summaryOf(seq);
@@ -357,6 +348,8 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
   auto msg = boost::make_shared<mild_lcd::PlaceSummary>();
   msg->station = settings_.team_station;
   msg->seq = seq;
+  msg->epoch = epoch_;
+  msg->epoch_start = ledger_.runStart();
   msg->robot = robot_names_.at(own.robot);
   msg->id = own.id;
   msg->descriptor_bytes = static_cast<uint32_t>(descriptor_bytes_);
@@ -372,6 +365,7 @@ mild_lcd::PlaceSummary::Ptr TeamLink::summaryOf(uint64_t seq) {
     const mild::Features features = map.features(*index);
     msg->stamp = stampOf(map.record(*index).stamp);
     msg->session = map.record(*index).session;
+    msg->looped_by = ledger_.loopedBy(settings_.team_station, msg->robot, msg->session, msg->id);
     msg->features = static_cast<uint32_t>(features.descriptors.size());
     mild::appendDescriptorBytes(mild::strongestDescriptors(features, summary_descriptors_), msg->descriptors);
   }
@@ -471,6 +465,19 @@ bool TeamLink::connected(const Peer& p) const {
 void TeamLink::onSummary(const mild_lcd::PlaceSummary::ConstPtr& msg) { queueSummary(msg, false); }
 void TeamLink::onBackfill(const mild_lcd::PlaceSummary::ConstPtr& msg) { queueSummary(msg, true); }
 
+// Under mutex_: whether a message of p's run `epoch`, which numbers from `start`, is of a run it has not
+// left. A new run: what was taken of its numbers from `start` on was an earlier run's, and is taken
+// again (StationLedger::summaryRun); what waits of another run is dropped.
+bool TeamLink::seeRun(Peer& p, uint64_t epoch, uint64_t start) {
+  const mild::PeerRuns::Seen seen = p.runs.see(epoch);
+  if (seen != mild::PeerRuns::Seen::kNew) return seen == mild::PeerRuns::Seen::kCurrent;
+  p.taken = std::min(p.taken, start);
+  for (auto it = p.waiting.begin(); it != p.waiting.end();) {
+    it = it->second.summary->epoch == epoch ? std::next(it) : p.waiting.erase(it);
+  }
+  return true;
+}
+
 void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool backfill) {
   if (msg->station == settings_.team_station) return;  // our own, broadcast
   const uint64_t bytes = bytesOf(*msg);
@@ -493,13 +500,14 @@ void TeamLink::queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool ba
       msg->descriptors.size() / width <= kMaxSummaryDescriptors &&
       msg->descriptors.size() <= 4 * static_cast<size_t>(settings_.team_summary_bytes) &&
       msg->known_stations.size() == msg->known_counts.size() && msg->known_stations.size() <= kMaxPeers + 1 &&
-      msg->unreachable.size() <= kMaxPeers + 1 && !msg->robot.empty() && msg->robot.size() <= kMaxNameLength;
+      msg->unreachable.size() <= kMaxPeers + 1 && !msg->robot.empty() && msg->robot.size() <= kMaxNameLength &&
+      msg->looped_by.size() <= kMaxPeers + 1 && station_names(msg->looped_by);
   if (!well_formed) {
     ++p->refused;
     return;
   }
-  if (msg->seq < p->taken) {
-    ++p->duplicates;
+  if (!seeRun(*p, msg->epoch, msg->epoch_start) || msg->seq < p->taken) {
+    ++p->duplicates;  // of a run it left, or taken already
     return;
   }
   // Ahead of a gap, at most this many wait; later ones are asked for again once the gap is filled.
@@ -522,13 +530,14 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
   std::lock_guard<std::mutex> guard(mutex_);
   Peer* p = peer(msg->station);
   if (!p || msg->peers.size() != msg->received.size() || msg->peers.size() != msg->loops_received.size() ||
-      msg->loops_from.size() > msg->peers.size()) {
+      msg->loops_from.size() > msg->peers.size() || msg->loops_epoch.size() > msg->peers.size()) {
     if (p)
       ++p->refused;
     else
       ++refused_;
     return;
   }
+  if (!seeRun(*p, msg->epoch, msg->epoch_start)) return;  // a run it left
   if (!connected(*p) && p->seen) ++p->reconnects;
   p->seen = true;
   p->last_seen = Clock::now();
@@ -541,8 +550,9 @@ void TeamLink::onStatus(const mild_lcd::TeamStatus::ConstPtr& msg) {
       ++p->refused;
       continue;
     }
-    p->acknowledged = std::max(p->acknowledged, claim);
-    p->holds_ours = msg->received[i];
+    // Our loops it counts are this run's, or none.
+    if (i < msg->loops_epoch.size() && msg->loops_epoch[i] == epoch_)
+      p->acknowledged = std::max(p->acknowledged, claim);
     if (i < msg->loops_from.size()) p->loops_from = msg->loops_from[i];
   }
   while (!p->unacknowledged.empty() && p->unacknowledged.front().loop->seq < p->acknowledged) {
@@ -655,15 +665,29 @@ void TeamLink::take(const std::string& name, const mild_lcd::PlaceSummary::Const
   bool asked = false;
   {
     const auto lock = shared_.lock();
-    // Taken whatever follows: a summary this station cannot use is counted, never asked again.
-    ledger_.took(name);
     {
       std::lock_guard<std::mutex> guard(mutex_);
-      if (Peer* p = peer(name)) p->taken = ledger_.received(name);
+      Peer* p = peer(name);
+      // Of a run the peer left while it waited (a heartbeat of its restart came between): dropped.
+      if (!p || p->runs.current != msg->epoch) return;
+      ledger_.summaryRun(name, msg->epoch, msg->epoch_start);
+      const bool in_turn = ledger_.received(name) == msg->seq;
+      // Taken whatever follows: a summary this station cannot use is counted, never asked again.
+      if (in_turn) ledger_.took(name);
+      p->taken = ledger_.received(name);
+      if (!in_turn) return;
     }
     const mild::DescriptorList descriptors =
         mild::descriptorsFromBytes(msg->descriptors.data(), msg->descriptors.size(), descriptor_bytes_);
     if (descriptors.empty()) return;
+    // A keyframe whose loop of ours is held, by the peer or here (decided before a crash): not
+    // decided again.
+    const std::vector<std::string>& by = msg->looped_by;
+    if (std::find(by.begin(), by.end(), settings_.team_station) != by.end() ||
+        ledger_.holdsLoop({name, msg->robot, msg->session, msg->id, settings_.team_station})) {
+      ledger_.announced(name, msg->robot, msg->session, msg->id);
+      return;
+    }
     const mild::PlaceSummary summary = coreSummary(*msg);
     const std::string remote = name + "/" + msg->robot;
     const auto last_session = remote_sessions_.find(remote);
@@ -771,15 +795,14 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
     msg->query_station = pending.peer;
     msg->features = static_cast<int32_t>(pending.summary->features);
     for (auto& c : msg->candidates) c.station = settings_.team_station;
+    // Held by content: decided once (a copy decided again after a crash is not published).
+    if (!ledger_.keepLoop(heldAs(*msg, settings_.team_station))) return;
     auto loop = boost::make_shared<mild_lcd::TeamLoop>();
     loop->decider = settings_.team_station;
+    loop->epoch = epoch_;
     loop->loop = *msg;
     std::lock_guard<std::mutex> guard(mutex_);
     if (Peer* p = peer(pending.peer)) {
-      // The peer took more of our loops than our ledger numbered (we restarted without the ledger,
-      // or crashed after our last save): numbering goes on above them, or it would take our next
-      // loops for ones it published. (A count no run reaches is refused in onStatus.)
-      if (p->acknowledged > ledger_.loopsSentTo(pending.peer)) ledger_.skipLoopsTo(pending.peer, p->acknowledged);
       loop->seq = ledger_.nextLoopFor(pending.peer);
       ++p->loops_decided;
       if (pending.late) ++p->loops_found_late;
@@ -788,6 +811,7 @@ void TeamLink::judged(const Pending& pending, const mild::Features* features) {
       p->bytes_out += bytesOf(*loop);
     }
   }
+  persist();
   publish_(robots, msg);
 }
 
@@ -815,7 +839,8 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
                                                                 << "', not a peer heard from, refused");
       return;
     }
-    loops_from = it->second.loops_from;
+    // The lowest it can still send, as its heartbeat says: of this loop's run only.
+    loops_from = it->second.runs.current == loop->epoch ? it->second.loops_from : 0;
     caught_up = it->second.summaries <= it->second.taken;
   }
   PeerLoopRules rules;
@@ -836,6 +861,8 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
     bool in_turn = false;  // the next of its loops expected here
     bool copy = false;     // one taken already (a resend crossing the acknowledgement)
     if (ledger_.received(loop->decider) > 0) {
+      // Numbered per run of the decider: a new run's from 0; a run it left sends no more.
+      if (ledger_.loopRun(loop->decider, loop->epoch) == mild::PeerRuns::Seen::kPast) return;
       // In their order only: a later one is dropped and comes again (the decider resends until
       // acknowledged), an earlier one was published already. A decider that can no longer send the
       // next one expected (it restarted, or crashed, with loops unacknowledged) is followed: those
@@ -865,7 +892,14 @@ void TeamLink::onLoop(const mild_lcd::TeamLoop::ConstPtr& loop) {
       return;
     }
     if (!in_turn) return;
+    // Held by content: a loop its decider decided again (after its crash) is taken, not published.
+    if (!ledger_.keepLoop(heldAs(loop->loop, loop->decider))) {
+      std::lock_guard<std::mutex> guard(mutex_);
+      if (Peer* p = peer(loop->decider)) ++p->duplicates;
+      return;
+    }
   }
+  persist();
   publish_({robot}, peerLoopAsPublished(*loop, rules));
 }
 
@@ -970,6 +1004,8 @@ void TeamLink::tick() {
   const auto lock = shared_.lock();
   std::lock_guard<std::mutex> guard(mutex_);
   status->station = settings_.team_station;
+  status->epoch = epoch_;
+  status->epoch_start = ledger_.runStart();
   status->summaries = ledger_.ownCount();
   status->descriptor_bytes = static_cast<uint32_t>(descriptor_bytes_);
   const auto now = Clock::now();
@@ -977,6 +1013,7 @@ void TeamLink::tick() {
     status->peers.push_back(name);
     status->received.push_back(ledger_.received(name));
     status->loops_received.push_back(ledger_.loopsReceivedFrom(name));
+    status->loops_epoch.push_back(ledger_.loopEpoch(name));
     status->loops_from.push_back(p.unacknowledged.empty() ? ledger_.loopsSentTo(name)
                                                           : p.unacknowledged.front().loop->seq);
     status->summaries_in += p.summaries_in;

@@ -80,6 +80,9 @@ class TeamLink {
   // Writes the ledger (atomically) when a path was given and the link started (a link that could
   // not read its ledger never writes over it). Under no lock; takes the detector's.
   void save();
+  // save() after a loop was decided or taken, before it is published: a crash after does not make it
+  // again (with ~save_on_shutdown; a failure is warned about).
+  void persist();
 
   // Under the detector lock, right after a keyframe was stored: numbered and summarised.
   void stored(const mild::DetectionResult& result);
@@ -100,7 +103,7 @@ class TeamLink {
     bool compatible = true;                                  // its descriptors have this station's width
     uint64_t summaries = 0;                                  // it has numbered, by its last heartbeat
     uint64_t acknowledged = 0;                               // loops of ours it took, by its last heartbeat
-    uint64_t holds_ours = 0;                                 // our summaries it took, by its last heartbeat
+    mild::PeerRuns runs;                                     // its runs heard (epochs), as the ledger's
     uint64_t loops_from = 0;                                 // the lowest number of its loops for us it can still send
     std::chrono::steady_clock::time_point backfill_asked{};  // the last gap request
     uint64_t taken = 0;   // its summaries taken (the ledger's count, readable under mutex_)
@@ -144,6 +147,7 @@ class TeamLink {
   void onSummary(const mild_lcd::PlaceSummary::ConstPtr& msg);
   void onBackfill(const mild_lcd::PlaceSummary::ConstPtr& msg);
   void queueSummary(const mild_lcd::PlaceSummary::ConstPtr& msg, bool backfill);
+  static bool seeRun(Peer& p, uint64_t epoch, uint64_t start);
   void onStatus(const mild_lcd::TeamStatus::ConstPtr& msg);
   void onRequest(const mild_lcd::TeamRequest::ConstPtr& msg);
   void onFeaturesMsg(const mild_lcd::TeamFeatures::ConstPtr& msg);
@@ -207,10 +211,7 @@ class TeamLink {
   std::map<std::string, uint64_t> last_counter_;
   uint64_t inbox_bytes_ = 0;  // of requests_, replies_ and loops_
   uint64_t summary_bytes_out_ = 0, summaries_out_ = 0;
-  // This station's summary numbers skipped this run because peers held them (a restart without the
-  // saved ledger, or a crash after the last save); bounded in all by kMaxSummariesSkipped. Under the
-  // detector lock.
-  uint64_t summaries_skipped_ = 0;
+  uint64_t epoch_ = 0;  // this run's (StationLedger::beginRun), set at start()
 
   ros::Publisher summaries_pub_, status_pub_;
   ros::Subscriber summaries_sub_, backfill_sub_, status_sub_, requests_sub_, features_sub_, loops_sub_;
