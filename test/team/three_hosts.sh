@@ -35,11 +35,14 @@
 # on two cores. Nothing leaves the namespaces: every address is 127.0.0.1 or 10.231.0.x inside
 # them, and nothing is routed out. Every namespace (with its veths) and every process in them is
 # removed on exit, also on failure or Ctrl-C.
-#   test/team/three_hosts.sh [--junit FILE] [--keep]
+#   test/team/three_hosts.sh [--junit FILE] [--keep] [--key]
 #     --junit FILE  also write the verdict as a JUnit file of one test case,
 #                   team.ThreeHostsWithAnOutageAndARestart
 #                   (scripts/test.sh counts it from its test_results folder)
 #     --keep        keep the work folder (logs, recordings) after a pass too; a failure always keeps it
+#     --key         every station with one team key (~team/key_file: a file of the work folder, mode
+#                   0600, made by openssl rand -hex 32): every team message authenticated, the
+#                   restarted station's included; the JUnit test case is then ...WithAKey
 #   MILD_TEAM_BAGS=DIR             make the bags there once and reuse them (default: in the work folder);
 #                                  empty it when mild_make_bag's features change
 #   MILD_TEAM_STATION_CMD='...'    how a station starts (see STATION_CMD below)
@@ -55,14 +58,18 @@ TEST_NAME="ThreeHostsWithAnOutageAndARestart"
 
 JUNIT=""
 KEEP=0
+KEYED=0
+KEY_FILE=""
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --junit) JUNIT="$2"; shift 2 ;;
     --keep) KEEP=1; shift ;;
+    --key) KEYED=1; shift ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) echo "three_hosts.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+[[ $KEYED == 1 ]] && TEST_NAME="${TEST_NAME}WithAKey"
 
 # Schedule, in seconds from t0 (when every station, player and recorder is ready).
 KEYFRAMES_PER_SECOND="${MILD_TEAM_KEYFRAMES_PER_SECOND:-1}"
@@ -102,7 +109,7 @@ STATUS_TOPIC=/mild_team/status
 # launch's default is under $HOME) and MILD_LAUNCH_PREFIX (scripts/test.sh sets it under
 # AddressSanitizer). Each process also gets a ROS_HOME of its own. It is stopped with SIGINT.
 # shellcheck disable=SC2016  # expanded later, by eval
-DEFAULT_STATION_CMD='roslaunch --wait mild_lcd mild_lcd_base_station.launch station:="$STATION" robots:="$ROBOTS" database_dir:="$MAPS" launch_prefix:="${MILD_LAUNCH_PREFIX:-}"'
+DEFAULT_STATION_CMD='roslaunch --wait mild_lcd mild_lcd_base_station.launch station:="$STATION" robots:="$ROBOTS" database_dir:="$MAPS" key_file:="$KEY_FILE" launch_prefix:="${MILD_LAUNCH_PREFIX:-}"'
 STATION_CMD="${MILD_TEAM_STATION_CMD:-$DEFAULT_STATION_CMD}"
 # The reference: one node, one map per robot, no station. By default each keyframe asks every
 # other robot's map: with the node's default (one other map per keyframe, in turn) it asks a given
@@ -210,6 +217,11 @@ export PATH="/usr/bin:$PATH"  # the ROS tools' Python is Debian's, not a pyenv o
 
 WORK=$(mktemp -d "${TMPDIR:-/tmp}/mild_team.XXXXXX")
 mkdir -p "$WORK/logs" "$WORK/home"
+if [[ $KEYED == 1 ]]; then
+  KEY_FILE="$WORK/team.key"
+  (umask 077 && openssl rand -hex 32 >"$KEY_FILE")
+  echo "team key: $KEY_FILE"
+fi
 BAGS="${MILD_TEAM_BAGS:-$WORK/bags}"
 mkdir -p "$BAGS"
 echo "work folder: $WORK"
