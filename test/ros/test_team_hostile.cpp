@@ -528,15 +528,26 @@ TEST(HostilePeer, AnOversizedMessageIsRefusedBeforeItIsDeserialised) {
 }
 
 // A station node of the test's own (its namespace, its own station name and database folder; the
-// standalone node, so that its pid is the process the test stops).
-pid_t startStation(const std::string& ns, const std::string& station, const std::string& folder) {
+// standalone node, so that its pid is the process the test stops), with `extra` private parameters.
+pid_t startStation(const std::string& ns, const std::string& station, const std::string& folder,
+                   const std::vector<std::string>& extra = {}) {
+  // The arguments are made before the fork: the child only execs.
+  std::vector<std::string> args = {MILD_NODE_BIN,
+                                   "__ns:=" + ns,
+                                   "__name:=mild_lcd",
+                                   "_team/station:=" + station,
+                                   "_database_dir:=" + folder,
+                                   "_database_path:=" + station + ".mild",
+                                   "_load_on_start:=true",
+                                   "_save_on_shutdown:=true",
+                                   "_use_image_input:=false"};
+  args.insert(args.end(), extra.begin(), extra.end());
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
   const pid_t pid = fork();
   if (pid == 0) {
-    const std::string ns_arg = "__ns:=" + ns, station_arg = "_team/station:=" + station,
-                      dir_arg = "_database_dir:=" + folder, path_arg = "_database_path:=" + station + ".mild";
-    execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", station_arg.c_str(), dir_arg.c_str(),
-          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_use_image_input:=false",
-          static_cast<char*>(nullptr));
+    execv(MILD_NODE_BIN, argv.data());
     _exit(127);
   }
   return pid;
@@ -760,16 +771,7 @@ uint64_t receivedFrom(const mild_lcd::TeamStatus& s, const std::string& peer) {
 
 // A station of one robot in `ns` (its maps and ledger in `folder`, saved every 15 s).
 pid_t startSavingStation(const std::string& ns, const std::string& station, const std::string& folder) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const std::string ns_arg = "__ns:=" + ns, station_arg = "_team/station:=" + station,
-                      dir_arg = "_database_dir:=" + folder, path_arg = "_database_path:=" + station + ".mild";
-    execl(MILD_NODE_BIN, MILD_NODE_BIN, ns_arg.c_str(), "__name:=mild_lcd", station_arg.c_str(), dir_arg.c_str(),
-          path_arg.c_str(), "_load_on_start:=true", "_save_on_shutdown:=true", "_autosave_period:=15",
-          "_use_image_input:=false", "_queue_size:=300", static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  return pid;
+  return startStation(ns, station, folder, {"_autosave_period:=15", "_queue_size:=300"});
 }
 
 // Publishes keyframes [first, last) in `ns` at 10 Hz; with `noise`, their descriptors random (they
