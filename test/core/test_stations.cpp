@@ -177,17 +177,7 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   EXPECT_EQ(again.loopsReceivedFrom("charlie"), 1u);
   EXPECT_EQ(again.own(1).known, (std::vector<std::pair<std::string, uint64_t>>{{"bravo", 2}}));
   EXPECT_EQ(again.own(1).unreachable, std::vector<std::string>{"charlie"});
-
-  // A crash after the last save: peers hold more than the ledger numbered. Numbering goes on above
-  // what they hold, summaries and loops alike.
-  again.skipTo(5);
-  EXPECT_EQ(again.ownCount(), 5u);
-  EXPECT_EQ(again.own(4).id, StationLedger::kNoKeyframe);
-  EXPECT_EQ(again.recordOwn(0, 13, 1), 5u);
-  again.skipLoopsTo("bravo", 4);
-  EXPECT_EQ(again.nextLoopFor("bravo"), 4u);
-  again.skipLoopsTo("bravo", 2);  // never back
-  EXPECT_EQ(again.nextLoopFor("bravo"), 5u);
+  EXPECT_EQ(again.recordOwn(0, 13, 1), 2u);  // numbering goes on from the saved count
 
   StationLedger other("bravo", 2);
   EXPECT_THROW(other.fromText(text), InvalidInput);

@@ -70,10 +70,9 @@ class StationLedger {
   // station knew of each peer is recorded with it.
   uint64_t recordOwn(size_t robot, uint64_t id, KeyframeIndex map_index, std::vector<std::string> unreachable = {});
   uint64_t ownCount() const { return own_.size(); }
-  // Numbers up to `count` taken without a keyframe (peers hold summaries of a crashed run's
-  // keyframes under them): their summaries carry nothing.
-  void skipTo(uint64_t count);
-  static constexpr uint64_t kNoKeyframe = ~uint64_t{0};  // Own::id of a skipped number
+  // Own::id of a number taken without a keyframe (a ledger saved by an earlier version, which skipped
+  // numbers its peers held after a crash; each run now has an epoch instead): its summary carries nothing.
+  static constexpr uint64_t kNoKeyframe = ~uint64_t{0};
   struct Own {
     size_t robot = 0;
     uint64_t id = 0;
@@ -112,8 +111,6 @@ class StationLedger {
   // number, and what the peer acknowledged (it holds loops [0, acknowledged)).
   uint64_t nextLoopFor(const std::string& peer);
   uint64_t loopsSentTo(const std::string& peer) const;
-  // Numbers below `count` taken (a peer holds loops of a crashed run under them).
-  void skipLoopsTo(const std::string& peer, uint64_t count);
   // Loops a peer decided for this station's keyframes: taken contiguously, as summaries.
   uint64_t loopsReceivedFrom(const std::string& peer) const;
   void tookLoop(const std::string& peer);

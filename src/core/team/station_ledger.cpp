@@ -51,14 +51,6 @@ uint64_t StationLedger::recordOwn(size_t robot, uint64_t id, KeyframeIndex map_i
   return seq;
 }
 
-void StationLedger::skipTo(uint64_t count) {
-  while (own_.size() < count) {
-    Own skipped;
-    skipped.id = kNoKeyframe;
-    own_.push_back(std::move(skipped));
-  }
-}
-
 uint64_t StationLedger::received(const std::string& peer) const {
   const auto it = received_.find(peer);
   return it == received_.end() ? 0 : it->second;
@@ -131,11 +123,6 @@ void StationLedger::forgetBeyond(size_t robot, KeyframeIndex map_size) {
 }
 
 uint64_t StationLedger::nextLoopFor(const std::string& peer) { return loops_sent_[peer]++; }
-
-void StationLedger::skipLoopsTo(const std::string& peer, uint64_t count) {
-  uint64_t& sent = loops_sent_[peer];
-  sent = std::max(sent, count);
-}
 
 uint64_t StationLedger::loopsSentTo(const std::string& peer) const {
   const auto it = loops_sent_.find(peer);
