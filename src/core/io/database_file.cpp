@@ -428,10 +428,7 @@ MapState readMapFile(const ConfinedFile& file, unsigned long long max_bytes) {
   }
 }
 
-namespace {
-
-// prepareLoad of a state read since `start` (the report's time counts the reading).
-PreparedLoad prepareRead(const KeyframeMap& map, MapState state, const std::string& origin, bool continue_session,
+PreparedLoad prepareLoad(const KeyframeMap& map, MapState state, const std::string& origin, bool continue_session,
                          std::chrono::steady_clock::time_point start) {
   LoadReport report;
   report.keyframes = state.records.size();
@@ -466,17 +463,10 @@ PreparedLoad prepareRead(const KeyframeMap& map, MapState state, const std::stri
   return PreparedLoad{std::move(*restore), std::move(report)};
 }
 
-}  // namespace
-
 PreparedLoad prepareLoad(const KeyframeMap& map, const ConfinedFile& file, bool continue_session,
                          unsigned long long max_bytes) {
-  const auto start = std::chrono::steady_clock::now();
-  return prepareRead(map, readMapFile(file, max_bytes), file.display(), continue_session, start);
-}
-
-PreparedLoad prepareLoad(const KeyframeMap& map, MapState state, const std::string& origin, bool continue_session,
-                         std::chrono::steady_clock::time_point started) {
-  return prepareRead(map, std::move(state), origin, continue_session, started);
+  const auto start = std::chrono::steady_clock::now();  // the report's time counts the reading
+  return prepareLoad(map, readMapFile(file, max_bytes), file.display(), continue_session, start);
 }
 
 void commitLoad(KeyframeMap& map, PreparedLoad&& prepared) { map.commitRestore(std::move(prepared.restore)); }

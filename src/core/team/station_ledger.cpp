@@ -213,7 +213,8 @@ std::map<std::string, PeerRuns> runsFromJson(const nlohmann::json& j) {
   std::map<std::string, PeerRuns> runs;
   for (const auto& [peer, r] : j.items()) {
     PeerRuns& runs_of = runs[peer];
-    runs_of.current = r.at("current").get<uint64_t>();
+    // 0: no run heard (toText writes an empty current so; no run draws 0).
+    if (const auto current = r.at("current").get<uint64_t>(); current != 0) runs_of.current = current;
     runs_of.past = r.at("past").get<std::vector<uint64_t>>();
     if (runs_of.past.size() > PeerRuns::kMaxPast) throw InvalidInput("the ledger keeps too many runs of a peer");
   }
