@@ -46,6 +46,10 @@ class ConfinedFile {
   // regular file sits at the name, IoError when the file cannot be written; whatever `write` throws
   // is passed on. The previous file is kept on any failure.
   void replace(const std::function<void(int fd)>& write, std::string_view signature) const;
+  // replace() with `text` as the whole content (which must begin with `signature`).
+  void replaceText(const std::string& text, std::string_view signature) const;
+  // The whole file as openForReading opens it. Throws IoError when it cannot be read whole.
+  std::string readText() const;
 
  private:
   int folder_fd_ = -1;

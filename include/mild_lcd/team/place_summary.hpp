@@ -17,13 +17,17 @@
 namespace mild {
 
 struct PlaceSummary {
-  std::string station;         // the station that stores the keyframe
-  uint64_t seq = 0;            // its number among that station's summaries: 0, 1, 2, ... in the order stored
-  std::string robot;           // the robot that saw it (a name of that station's ~robots)
-  uint64_t id = 0;             // its id in that robot's map
-  double stamp = 0.0;          // on its station's clock: never compared with another station's
-  uint32_t features = 0;       // how many features the whole keyframe has
-  DescriptorList descriptors;  // the strongest, at most the summary's size
+  std::string station;                   // the station that stores the keyframe
+  uint64_t seq = 0;                      // its number among that station's summaries: 0, 1, 2, ... in the order stored
+  uint64_t epoch = 0;                    // the station's run (StationLedger::beginRun): a peer keys what it took by it
+  uint64_t epoch_start = 0;              // the first number of that run
+  std::string robot;                     // the robot that saw it (a name of that station's ~robots)
+  uint64_t id = 0;                       // its id in that robot's map
+  uint32_t session = 0;                  // its session there
+  double stamp = 0.0;                    // on its station's clock: never compared with another station's
+  uint32_t features = 0;                 // how many features the whole keyframe has
+  uint32_t descriptor_bytes = 0;         // the width of each descriptor below
+  std::vector<uint8_t> descriptor_data;  // the strongest descriptors, row after row (at most the summary's size)
   // For each other station: how many of its summaries this station held (contiguously from 0)
   // when it stored this keyframe. Which keyframes of two stations came first is decided by this
   // (StationLedger::eligiblePrefix), never by their clocks.
@@ -31,6 +35,9 @@ struct PlaceSummary {
   // The stations it had not heard from for a while when it stored this keyframe (an outage): to
   // them, a loop of this keyframe is found late.
   std::vector<std::string> unreachable;
+  std::vector<std::string> looped_by;  // stations whose loop for it its station holds: not decided again
+  bool well_formed = true;             // received: false when the wire's lists did not pair up
+  uint64_t wire_bytes = 0;             // received: its serialised size
 };
 
 // The descriptors a summary carries: the `count` of the strongest keypoints (by detector response;

@@ -237,6 +237,36 @@ void ConfinedFile::replace(const std::function<void(int fd)>& write, std::string
   ::fsync(folder_fd_);  // the rename itself must reach the disk too
 }
 
+void ConfinedFile::replaceText(const std::string& text, std::string_view signature) const {
+  replace(
+      [&text, this](int fd) {
+        size_t done = 0;
+        while (done < text.size()) {
+          const ssize_t n = ::pwrite(fd, text.data() + done, text.size() - done, static_cast<off_t>(done));
+          if (n < 0 && errno == EINTR) continue;
+          if (n <= 0) throw IoError("cannot write " + display_ + ": " + std::string(std::strerror(errno)));
+          done += static_cast<size_t>(n);
+        }
+      },
+      signature);
+}
+
+std::string ConfinedFile::readText() const {
+  unsigned long long size = 0;
+  const int fd = openForReading(size);
+  std::string text(size, '\0');
+  size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::read(fd, text.data() + done, text.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    done += static_cast<size_t>(n);
+  }
+  ::close(fd);
+  if (done != text.size()) throw IoError("cannot read " + display_ + " whole");
+  return text;
+}
+
 int ConfinedFile::openForReading(unsigned long long& size) const {
   // O_NONBLOCK: opening a FIFO must not wait for a writer; O_NOFOLLOW: a link is refused (ELOOP).
   const int fd = ::openat(folder_fd_, name_.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);

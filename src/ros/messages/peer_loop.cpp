@@ -1,7 +1,8 @@
-#include "mild_lcd/ros/team/peer_loop.hpp"
+#include "mild_lcd/ros/messages/peer_loop.hpp"
 
 #include <cmath>
 
+#include <ros/serialization.h>
 #include <boost/make_shared.hpp>
 
 namespace mild_lcd {
@@ -73,6 +74,20 @@ mild_lcd::LoopClosure::Ptr peerLoopAsPublished(const mild_lcd::TeamLoop& loop, c
   auto msg = boost::make_shared<mild_lcd::LoopClosure>(loop.loop);
   for (auto& c : msg->candidates) c.accepted = c.verified && c.probability >= rules.decision_probability;
   return msg;
+}
+
+mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& loop, const PeerLoopRules& rules) {
+  mild::PeerLoop p;
+  p.decider = loop.decider;
+  p.epoch = loop.epoch;
+  p.seq = loop.seq;
+  const mild_lcd::LoopClosure& l = loop.loop;
+  p.query = {l.query_station, l.query_robot, l.query_session, l.query_id, loop.decider};
+  for (const auto& c : l.candidates) p.candidates.push_back({c.robot, c.session, c.id});
+  p.content_problem = peerLoopContentProblem(loop, rules);
+  if (p.content_problem.empty()) p.published = mild_lcd::LoopClosure::ConstPtr(peerLoopAsPublished(loop, rules));
+  p.wire_bytes = ros::serialization::serializationLength(loop);
+  return p;
 }
 
 }  // namespace mild_lcd

@@ -3,13 +3,14 @@
 // What a station checks of a loop a peer decided for one of its keyframes before publishing it
 // (docs/multi_robot.md, "What a station refuses"): a peer's message is never published as it came.
 // The content is checked here; whether its query and candidates are keyframes this station stored
-// and the peer announced is TeamLink's to ask (it holds the maps and the ledger).
+// and the peer announced is the station protocol's (mild::Station: it holds the maps and the ledger).
 
 #include <cstddef>
 #include <string>
 
 #include "mild_lcd/LoopClosure.h"
 #include "mild_lcd/TeamLoop.h"
+#include "mild_lcd/team/team_messages.hpp"
 
 namespace mild_lcd {
 
@@ -28,5 +29,10 @@ std::string peerLoopContentProblem(const mild_lcd::TeamLoop& loop, const PeerLoo
 // The loop as this station publishes it: `accepted` decided here, as probability >=
 // decision_probability for verified candidates only (a peer's word on it is not taken).
 mild_lcd::LoopClosure::Ptr peerLoopAsPublished(const mild_lcd::TeamLoop& loop, const PeerLoopRules& rules);
+
+// The loop as the station protocol takes it: its numbering, query and candidates, its content's
+// problem ("" when none) and, as what is published when it is taken, peerLoopAsPublished
+// (a mild_lcd::LoopClosure::ConstPtr).
+mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& loop, const PeerLoopRules& rules);
 
 }  // namespace mild_lcd

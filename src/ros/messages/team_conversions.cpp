@@ -1,0 +1,157 @@
+#include "mild_lcd/ros/messages/team_conversions.hpp"
+
+#include <ros/serialization.h>
+
+#include "mild_lcd/ros/messages/message_conversions.hpp"
+
+namespace mild_lcd {
+
+mild::StationSettings stationSettings(const NodeSettings& s, std::vector<std::string> robots) {
+  mild::StationSettings out;
+  out.station = s.team_station;
+  out.robots = std::move(robots);
+  out.summary_bytes = static_cast<size_t>(s.team_summary_bytes);
+  out.backfill_batch = static_cast<size_t>(s.team_backfill_batch);
+  out.max_pending_pulls = static_cast<size_t>(s.team_max_pending_pulls);
+  out.max_requests_per_second = s.team_max_requests_per_second;
+  out.peer_timeout = s.team_peer_timeout;
+  out.max_keyframe_features = static_cast<size_t>(s.max_keyframe_features);
+  return out;
+}
+
+mild::PlaceSummary summaryFromMsg(const mild_lcd::PlaceSummary& msg) {
+  mild::PlaceSummary s;
+  s.station = msg.station;
+  s.seq = msg.seq;
+  s.epoch = msg.epoch;
+  s.epoch_start = msg.epoch_start;
+  s.robot = msg.robot;
+  s.id = msg.id;
+  s.session = msg.session;
+  s.stamp = msg.stamp.toSec();
+  s.features = msg.features;
+  s.descriptor_bytes = msg.descriptor_bytes;
+  s.descriptor_data = msg.descriptors;
+  s.well_formed = msg.known_stations.size() == msg.known_counts.size();
+  for (size_t i = 0; i < msg.known_stations.size() && i < msg.known_counts.size(); ++i) {
+    s.known.emplace_back(msg.known_stations[i], msg.known_counts[i]);
+  }
+  s.unreachable = msg.unreachable;
+  s.looped_by = msg.looped_by;
+  s.wire_bytes = ros::serialization::serializationLength(msg);
+  return s;
+}
+
+mild_lcd::PlaceSummary summaryToMsg(const mild::PlaceSummary& s) {
+  mild_lcd::PlaceSummary msg;
+  msg.station = s.station;
+  msg.seq = s.seq;
+  msg.epoch = s.epoch;
+  msg.epoch_start = s.epoch_start;
+  msg.robot = s.robot;
+  msg.id = s.id;
+  msg.session = s.session;
+  msg.stamp = stampOf(s.stamp);
+  msg.features = s.features;
+  msg.descriptor_bytes = s.descriptor_bytes;
+  msg.descriptors = s.descriptor_data;
+  for (const auto& [station, count] : s.known) {
+    msg.known_stations.push_back(station);
+    msg.known_counts.push_back(count);
+  }
+  msg.unreachable = s.unreachable;
+  msg.looped_by = s.looped_by;
+  return msg;
+}
+
+// The heartbeat's fields, the same on both sides.
+#define MILD_TEAM_STATUS_FIELDS(X)                                                                              \
+  X(station)                                                                                                    \
+  X(epoch) X(epoch_start) X(summaries) X(descriptor_bytes) X(peers) X(received) X(loops_received) X(loops_from) \
+      X(loops_epoch) X(summaries_in) X(summary_bytes_in) X(features_in) X(feature_bytes_in) X(loops_decided)    \
+          X(loops_found_late) X(refused)
+#define MILD_COPY_FIELD(f) to.f = from.f;
+
+mild::TeamStatus statusFromMsg(const mild_lcd::TeamStatus& from) {
+  mild::TeamStatus to;
+  MILD_TEAM_STATUS_FIELDS(MILD_COPY_FIELD)
+  return to;
+}
+
+mild_lcd::TeamStatus statusToMsg(const mild::TeamStatus& from) {
+  mild_lcd::TeamStatus to;
+  MILD_TEAM_STATUS_FIELDS(MILD_COPY_FIELD)
+  return to;
+}
+
+#define MILD_TEAM_REQUEST_FIELDS(X) X(from) X(request_id) X(kind) X(first) X(count) X(robot) X(id)
+
+mild::TeamRequest requestFromMsg(const mild_lcd::TeamRequest& from) {
+  mild::TeamRequest to;
+  MILD_TEAM_REQUEST_FIELDS(MILD_COPY_FIELD)
+  return to;
+}
+
+mild_lcd::TeamRequest requestToMsg(const mild::TeamRequest& from) {
+  mild_lcd::TeamRequest to;
+  MILD_TEAM_REQUEST_FIELDS(MILD_COPY_FIELD)
+  return to;
+}
+
+#undef MILD_COPY_FIELD
+
+mild::TeamFeatures featuresReplyFromMsg(const mild_lcd::TeamFeatures& msg) {
+  mild::TeamFeatures reply;
+  reply.from = msg.from;
+  reply.request_id = msg.request_id;
+  reply.status = msg.status;
+  reply.wire_bytes = ros::serialization::serializationLength(msg);
+  if (msg.status != mild_lcd::TeamFeatures::OK) return reply;
+  try {
+    reply.features = featuresFromTeamReply(msg);  // with its keypoints' precision, the detection scale
+    mild::checkCameraAndDepths(*reply.features);
+  } catch (const std::exception&) {
+    reply.features.reset();  // unreadable: judged unverified, counted
+  }
+  return reply;
+}
+
+mild_lcd::TeamFeatures featuresReplyToMsg(const mild::TeamFeatures& reply, int descriptor_bytes) {
+  mild_lcd::TeamFeatures msg;
+  msg.from = reply.from;
+  msg.request_id = reply.request_id;
+  msg.status = reply.status;
+  msg.reason = reply.reason;
+  if (reply.features) {
+    setTeamReplyFeatures(*reply.features, descriptor_bytes, msg);
+    msg.keyframe.id = reply.id;
+    msg.keyframe.has_id = true;
+  }
+  return msg;
+}
+
+mild_lcd::LoopClosure decidedLoopToMsg(const mild::DecidedLoop& loop, const std::string& station, bool correspondences,
+                                       const std::vector<std::string>& robot_names) {
+  std_msgs::Header header;
+  header.stamp = stampOf(loop.query_stamp);
+  mild_lcd::LoopClosure msg = loopClosureToMsg(loop.result, header, loop.database_size, correspondences, robot_names);
+  msg.query_id = loop.query_id;
+  msg.query_session = loop.query_session;  // ids repeat across sessions: the pair names it
+  msg.query_robot = loop.query_robot;
+  msg.query_station = loop.peer;
+  msg.features = static_cast<int32_t>(loop.query_features);
+  for (auto& c : msg.candidates) c.station = station;
+  return msg;
+}
+
+mild_lcd::TeamLoop teamLoopToMsg(const mild::DecidedLoop& loop, const std::string& station, bool correspondences,
+                                 const std::vector<std::string>& robot_names) {
+  mild_lcd::TeamLoop msg;
+  msg.decider = station;
+  msg.epoch = loop.epoch;
+  msg.seq = loop.seq;
+  msg.loop = decidedLoopToMsg(loop, station, correspondences, robot_names);
+  return msg;
+}
+
+}  // namespace mild_lcd
