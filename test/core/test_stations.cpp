@@ -24,11 +24,13 @@
 
 #include <opencv2/core.hpp>
 
+#include "../common/run_command.hpp"
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/team/place_summary.hpp"
+#include "mild_lcd/team/station_identity.hpp"
 #include "mild_lcd/team/station_ledger.hpp"
 #include "mild_lcd/team/team_key.hpp"
 #include "sample_halves.hpp"
@@ -166,6 +168,8 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   ledger.recordOwn(1, 12, 0, {"charlie"});  // charlie could not be heard from then
   ledger.nextLoopFor("bravo");
   ledger.tookLoop("charlie");
+  ledger.setIdFloor(1, 20000);
+  ledger.setCounters({{"bravo /mild_team/status", 1796661181187402269u}});
   const std::string text = ledger.toText();
 
   StationLedger again("alpha", 2);
@@ -177,6 +181,10 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   EXPECT_EQ(again.loopsReceivedFrom("charlie"), 1u);
   EXPECT_EQ(again.own(1).known, (std::vector<std::pair<std::string, uint64_t>>{{"bravo", 2}}));
   EXPECT_EQ(again.own(1).unreachable, std::vector<std::string>{"charlie"});
+  EXPECT_EQ(again.idFloor(0), 0u);  // none reserved
+  EXPECT_EQ(again.idFloor(1), 20000u);
+  EXPECT_EQ(again.counters().at("bravo /mild_team/status"), 1796661181187402269u);
+  EXPECT_THROW(again.setIdFloor(2, 1), InvalidInput);
   EXPECT_EQ(again.recordOwn(0, 13, 1), 2u);  // numbering goes on from the saved count
 
   StationLedger other("bravo", 2);
@@ -449,6 +457,77 @@ TEST(TeamKey, IsReadOnlyFromAFileOnlyItsOwnerCanRead) {
   ::chmod((dir / "short.key").c_str(), 0600);
   EXPECT_THROW(TeamKey::fromFile((dir / "short.key").string()), InvalidInput);
   EXPECT_THROW(TeamKey::fromFile((dir / "absent.key").string()), IoError);
+  std::filesystem::remove_all(dir);
+}
+
+// A station's name is bound to its own key: a message sealed by alpha verifies as alpha's only,
+// and only whole; a key that is not the roster's for the station's name, a station key without a
+// roster, and a roster that is not a folder of regular "<station>.pub" files are refused.
+TEST(StationIdentity, ANameIsAcceptedOnlyWithItsOwnKey) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("mild_station_keys_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "roster");
+  for (const std::string name : {"alpha", "bravo"}) {
+    const std::string key = (dir / (name + ".pem")).string();
+    const test::CommandResult made =
+        test::runCommand("(umask 077; openssl genpkey -algorithm ed25519 -out " + key + ") && openssl pkey -in " + key +
+                         " -pubout -out " + (dir / "roster" / (name + ".pub")).string());
+    ASSERT_EQ(made.status, 0) << made.output;
+  }
+  const std::string roster = (dir / "roster").string();
+  std::ofstream((dir / "team.key").string()) << std::string(64, 'f');
+  ::chmod((dir / "team.key").c_str(), 0600);
+  const TeamCredentials alpha =
+      TeamCredentials::fromFiles((dir / "team.key").string(), (dir / "alpha.pem").string(), roster, "alpha");
+  const TeamCredentials bravo =
+      TeamCredentials::fromFiles((dir / "team.key").string(), (dir / "bravo.pem").string(), roster, "bravo");
+  ASSERT_NE(alpha.roster(), nullptr);
+  EXPECT_EQ(alpha.roster()->size(), 2u);
+  const std::string data = "a summary";
+  const auto* bytes = reinterpret_cast<const uint8_t*>(data.data());
+  const std::vector<uint8_t> seal = alpha.seal(bytes, data.size());
+  EXPECT_EQ(seal.size(), TeamKey::kMacBytes + StationSigner::kSignatureBytes);
+  EXPECT_TRUE(bravo.verify("alpha", bytes, data.size(), seal));
+  EXPECT_FALSE(bravo.verify("bravo", bytes, data.size(), seal)) << "alpha's seal in bravo's name";
+  EXPECT_FALSE(bravo.verify("zulu", bytes, data.size(), seal)) << "a name not in the roster";
+  std::vector<uint8_t> changed = seal;
+  changed.back() ^= 1;
+  EXPECT_FALSE(bravo.verify("alpha", bytes, data.size(), changed)) << "a changed signature";
+  changed = seal;
+  changed.front() ^= 1;
+  EXPECT_FALSE(bravo.verify("alpha", bytes, data.size(), changed)) << "a changed team MAC";
+  EXPECT_FALSE(bravo.verify("alpha", bytes, data.size() - 1, seal)) << "changed data";
+  EXPECT_FALSE(bravo.verify("alpha", bytes, data.size(), std::vector<uint8_t>(seal.begin(), seal.begin() + 32)));
+  // Membership alone (the team key, no roster) cannot pass for a named station, nor the reverse.
+  const TeamCredentials member = TeamCredentials::fromFiles((dir / "team.key").string(), "", "", "alpha");
+  EXPECT_FALSE(bravo.verify("alpha", bytes, data.size(), member.seal(bytes, data.size())));
+  EXPECT_FALSE(member.verify("alpha", bytes, data.size(), seal));
+  EXPECT_TRUE(member.verify("alpha", bytes, data.size(), member.seal(bytes, data.size())));
+
+  EXPECT_THROW(TeamCredentials::fromFiles("", (dir / "bravo.pem").string(), roster, "alpha"), InvalidInput)
+      << "bravo's key for alpha";
+  EXPECT_THROW(TeamCredentials::fromFiles("", (dir / "alpha.pem").string(), roster, "charlie"), InvalidInput)
+      << "a station not in the roster";
+  EXPECT_THROW(TeamCredentials::fromFiles("", (dir / "alpha.pem").string(), "", "alpha"), InvalidInput);
+  EXPECT_THROW(TeamCredentials::fromFiles("", "", roster, "alpha"), InvalidInput);
+  ::chmod((dir / "alpha.pem").c_str(), 0644);
+  EXPECT_THROW(TeamCredentials::fromFiles("", (dir / "alpha.pem").string(), roster, "alpha"), InvalidInput)
+      << "a private key others can read";
+  ::chmod((dir / "alpha.pem").c_str(), 0600);
+  std::filesystem::create_symlink(dir / "roster" / "alpha.pub", dir / "roster" / "charlie.pub");
+  EXPECT_THROW(StationRoster::fromFolder(roster), InvalidInput) << "a link in the roster";
+  std::filesystem::remove(dir / "roster" / "charlie.pub");
+  std::filesystem::copy_file(dir / "roster" / "alpha.pub", dir / "roster" / "Charlie.pub");
+  EXPECT_THROW(StationRoster::fromFolder(roster), InvalidInput) << "not a station name";
+  std::filesystem::remove(dir / "roster" / "Charlie.pub");
+  std::ofstream((dir / "roster" / "charlie.pub").string()) << "not a key";
+  EXPECT_THROW(StationRoster::fromFolder(roster), InvalidInput) << "not a public key";
+  std::filesystem::remove(dir / "roster" / "charlie.pub");
+  EXPECT_NO_THROW(StationRoster::fromFolder(roster));
+  std::filesystem::create_directories(dir / "empty");
+  EXPECT_THROW(StationRoster::fromFolder((dir / "empty").string()), InvalidInput);
+  EXPECT_THROW(StationRoster::fromFolder((dir / "absent").string()), IoError);
   std::filesystem::remove_all(dir);
 }
 

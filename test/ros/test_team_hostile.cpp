@@ -41,6 +41,8 @@
 #include "mild_lcd/TeamLoop.h"
 #include "mild_lcd/TeamRequest.h"
 #include "mild_lcd/TeamStatus.h"
+#include "mild_lcd/ros/messages/team_conversions.hpp"
+#include "mild_lcd/team/station_identity.hpp"
 #include "ros_test_support.hpp"
 
 namespace mild_lcd::test {
@@ -745,6 +747,97 @@ TEST(TeamKey, AStationWithAKeyRefusesEveryMessageWithoutIt) {
     for (const auto& c : m.candidates) EXPECT_NE(c.station, "mallory") << "a forged loop was published";
   }
   for (const auto& r : replies.messages()) EXPECT_NE(r.from, "kilo") << "a forged request was answered";
+  kill(node, SIGINT);
+  int status = 0;
+  waitpid(node, &status, 0);
+  fs::remove_all(root);
+}
+
+// With a roster (~team/roster_dir, ~team/station_key_file), a station's name is bound to its own
+// key: the test holds the team key, so its messages pass the team MAC, and lima's and mallory's
+// private keys, of which only lima's is in kilo's roster. Heartbeats signed by mallory in lima's
+// name, or in its own (not in the roster), are refused and counted against the name they claim;
+// lima's own heartbeat, signed with lima's key, makes lima a peer.
+TEST(TeamKey, AStationWithARosterTakesANameOnlyWithItsKey) {
+  const char* home = std::getenv("ROS_HOME");
+  const fs::path root = fs::path(home && *home ? home : "/tmp") / "mild_team_roster_test";
+  fs::remove_all(root);
+  fs::create_directories(root / "roster");
+  const std::string key = (root / "team.key").string();
+  std::ofstream(key) << "4f1c2b8e9d0a7e6f5c4b3a29180716253445362718091a2b3c4d5e6f70819203\n";
+  ASSERT_EQ(::chmod(key.c_str(), 0600), 0);
+  for (const std::string name : {"kilo", "lima", "mallory"}) {
+    const std::string pem = (root / (name + ".pem")).string();
+    const std::string pub = (root / (name == "mallory" ? "mallory.pub" : "roster/" + name + ".pub")).string();
+    ASSERT_EQ(std::system(("(umask 077; openssl genpkey -algorithm ed25519 -out " + pem + ") && openssl pkey -in " +
+                           pem + " -pubout -out " + pub)
+                              .c_str()),
+              0);
+  }
+  const pid_t node = fork();
+  if (node == 0) {
+    const std::string key_arg = "_team/key_file:=" + key;
+    const std::string station_key = "_team/station_key_file:=" + (root / "kilo.pem").string();
+    const std::string roster = "_team/roster_dir:=" + (root / "roster").string();
+    execl(MILD_NODE_BIN, MILD_NODE_BIN, "__ns:=/rostered", "__name:=mild_lcd", "_team/station:=kilo", key_arg.c_str(),
+          station_key.c_str(), roster.c_str(), "_use_image_input:=false", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  ASSERT_GT(node, 0);
+  ros::NodeHandle nh;
+  TopicLog<mild_lcd::TeamStatus> statuses("/mild_team/status");
+  ros::Publisher status_pub = nh.advertise<mild_lcd::TeamStatus>("/mild_team/status", 100);
+  const auto kilo = [&] {
+    mild_lcd::TeamStatus last;
+    for (const auto& st : statuses.messages()) {
+      if (st.station == "kilo") last = st;
+    }
+    return last;
+  };
+  const ros::WallTime heard_by = ros::WallTime::now() + ros::WallDuration(30.0);
+  while (kilo().station.empty() && ros::WallTime::now() < heard_by) ros::WallDuration(0.1).sleep();
+  ASSERT_EQ(kilo().station, "kilo");
+  EXPECT_EQ(kilo().mac.size(), 96u) << "the team MAC and kilo's signature";
+  ASSERT_TRUE(waitForSubscriber(status_pub, 30.0));
+  const auto credentials = [&](const std::string& signer) {
+    return mild::TeamCredentials::fromFiles(key, (root / (signer + ".pem")).string(),
+                                            (root / (signer == "mallory" ? "mallory_roster" : "roster")).string(),
+                                            signer);
+  };
+  fs::create_directories(root / "mallory_roster");
+  fs::copy_file(root / "mallory.pub", root / "mallory_roster" / "mallory.pub");
+  const mild::TeamCredentials lima = credentials("lima"), mallory = credentials("mallory");
+  uint64_t counter = 1;
+  const auto send = [&](const std::string& name, const mild::TeamCredentials& by) {
+    mild_lcd::TeamStatus st;
+    st.station = name;
+    st.epoch = 7;
+    st.summaries = 0;
+    st.descriptor_bytes = 32;
+    st.counter = counter++;
+    const std::vector<uint8_t> bytes = mild_lcd::macInput(st, "/mild_team/status");
+    st.mac = by.seal(bytes.data(), bytes.size());
+    status_pub.publish(st);
+  };
+  const uint64_t refused_before = kilo().refused;
+  for (int i = 0; i < 20; ++i) {
+    send("lima", mallory);     // in lima's name, mallory's signature
+    send("mallory", mallory);  // a name the roster does not hold
+    ros::WallDuration(0.05).sleep();
+  }
+  ros::WallDuration(2.5).sleep();
+  mild_lcd::TeamStatus last = kilo();
+  EXPECT_GE(last.refused - refused_before, 40u) << "the impostor's heartbeats were not all counted";
+  EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "lima"), 0) << "mallory made lima a peer";
+  EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "mallory"), 0) << "a name not in the roster was taken";
+  send("lima", lima);
+  const ros::WallTime joined_by = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < joined_by) {
+    last = kilo();
+    if (std::count(last.peers.begin(), last.peers.end(), "lima") > 0) break;
+    ros::WallDuration(0.1).sleep();
+  }
+  EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "lima"), 1) << "lima's own heartbeat was refused";
   kill(node, SIGINT);
   int status = 0;
   waitpid(node, &status, 0);

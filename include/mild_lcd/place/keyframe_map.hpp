@@ -8,6 +8,7 @@
 // depend on the map alone; the pipeline that queries it, filters, verifies and scores
 // (detector/loop_detector.hpp) runs over it, as DBoW2's detector runs over its database.
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -112,6 +113,9 @@ class KeyframeMap {
   std::optional<KeyframeIndex> find(uint64_t id) const;
   Features features(KeyframeIndex k) const;
   uint64_t nextId() const { return contents_.next_id; }
+  // Ids below `floor` are not given out (by store() without an id) from now on: they may have been
+  // given out by a run whose keyframes this map does not hold (a crash before its save).
+  void raiseNextId(uint64_t floor) { contents_.next_id = std::max(contents_.next_id, std::min(floor, kMaxKeyframeId)); }
   // Keyframes [0, sessionStart()) come from earlier sessions and are always eligible.
   KeyframeIndex sessionStart() const { return contents_.session_start; }
   // The session new keyframes join: 0 at first, above every stored one after a load or merge

@@ -104,8 +104,9 @@ class Station {
   Station(StationSettings settings, StationMaps& maps);
 
   // Before anything else: the ledger saved by an earlier run (none: a first run), the key's
-  // presence (messages are then admitted only with a valid MAC), and this run's epoch. Throws
-  // InvalidInput for a ledger of another station or unreadable.
+  // presence (messages are then admitted only with a valid MAC), and this run's epoch. Each robot's
+  // map gives no id an earlier run may have given (StationLedger::idFloor): save the ledger after
+  // this, before the first keyframe. Throws InvalidInput for a ledger of another station or unreadable.
   void start(const std::optional<std::string>& ledger_text, bool keyed, uint64_t epoch = StationLedger::drawEpoch());
   bool started() const { return started_; }
   uint64_t epoch() const { return epoch_; }
@@ -216,6 +217,7 @@ class Station {
   std::mutex mutex_;  // everything below
   std::condition_variable wake_;
   bool halted_ = false, draining_ = false;
+  bool ids_reserved_ = false;  // a robot's next block of ids: the ledger is to be saved
   LoopRules rules_;
   std::map<std::string, Peer> peers_;
   std::vector<std::string> new_peers_;

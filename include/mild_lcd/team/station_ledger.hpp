@@ -119,6 +119,7 @@ class StationLedger {
 
   // This station's run: a random epoch (drawEpoch) begun at start-up. Summaries numbered from
   // runStart() on are this run's; its loops are numbered from 0 per peer again.
+  static constexpr size_t kMaxCounters = 64 * 65;  // Station's bound on senders x topics
   static uint64_t drawEpoch();
   void beginRun(uint64_t epoch);
   uint64_t epoch() const { return epoch_; }
@@ -143,6 +144,17 @@ class StationLedger {
 
   // The ledger as text (JSON), and back. fromText throws InvalidInput for text that is not a
   // ledger of this station with this many robots, changing nothing.
+  // Per robot: the keyframe id below which this station's runs may have given ids out. A run
+  // reserves ids in blocks, saved before it gives them (Station), so that a restart after a crash
+  // (its map saved earlier, or not at all) gives out none of them again: 0 when none was reserved.
+  uint64_t idFloor(size_t robot) const { return robot < id_floors_.size() ? id_floors_[robot] : 0; }
+  void setIdFloor(size_t robot, uint64_t floor);
+
+  // With a team key: the last message counter taken per sender and topic ("<sender> <topic>"), so
+  // that a message recorded before a restart and replayed after it is refused.
+  const std::map<std::string, uint64_t>& counters() const { return counters_; }
+  void setCounters(std::map<std::string, uint64_t> counters) { counters_ = std::move(counters); }
+
   std::string toText() const;
   void fromText(const std::string& text);
 
@@ -155,6 +167,8 @@ class StationLedger {
 
   std::string station_;
   size_t robots_ = 0;
+  std::vector<uint64_t> id_floors_;  // per robot (idFloor)
+  std::map<std::string, uint64_t> counters_;
   std::vector<Own> own_;                                         // by seq
   std::vector<std::vector<Numbered>> numbered_;                  // per robot, by map index: its keyframes' seqs
   std::map<std::string, uint64_t> received_;                     // per peer

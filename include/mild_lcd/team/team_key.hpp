@@ -33,4 +33,12 @@ class TeamKey {
   std::string secret_;
 };
 
+// A key file's content (at most 4 KB): a regular file (a link, FIFO or device is refused, never
+// followed or waited on), owned by this process's user and readable by nobody else, else
+// InvalidInput names `what` and why; IoError when it cannot be read.
+std::string readOwnerOnlyFile(const std::string& path, const std::string& what);
+// A public file of at most 4 KB named `name` in the open folder `folder_fd`, as above but readable by
+// anyone. `display`: its path, for messages.
+std::string readConfinedFile(int folder_fd, const std::string& name, const std::string& display);
+
 }  // namespace mild

@@ -30,6 +30,9 @@ constexpr uint64_t kAbsurdCount = uint64_t{1} << 62;
 // A summary's bytes beyond its descriptors: its names (each a station's, at most 32 characters, at
 // most kMaxPeers + 1 of each list), counts and fixed fields.
 constexpr uint64_t kMaxSummaryOverheadBytes = 16384;
+// Keyframe ids reserved per robot at a time (StationLedger::idFloor): the ledger is saved with the
+// next block before half of this one is given out.
+constexpr uint64_t kIdBlock = 10000;
 
 bool stationNames(const std::vector<std::string>& names) {
   return std::all_of(names.begin(), names.end(), [](const std::string& n) { return validStationName(n); });
@@ -71,11 +74,19 @@ void Station::start(const std::optional<std::string>& ledger_text, bool keyed, u
   // A run of its own: what peers took of earlier runs (a crash's included) never collides with it.
   ledger_.beginRun(epoch);
   epoch_ = ledger_.epoch();
+  // Ids an earlier run may have given out (a crash before its map was saved) are not given again:
+  // the keyframes peers heard of keep their names. The link saves the ledger before any is given.
+  for (size_t r = 0; r < settings_.robots.size(); ++r) {
+    KeyframeMap& map = team.robot(r).map();
+    map.raiseNextId(ledger_.idFloor(r));
+    ledger_.setIdFloor(r, map.nextId() + kIdBlock);
+  }
   keyed_ = keyed;
   std::lock_guard<std::mutex> guard(mutex_);
   rules_.max_candidates = static_cast<size_t>(team.params().candidates.max_candidates);
   rules_.max_correspondences = settings_.max_keyframe_features;
   rules_.decision_probability = team.params().scoring.decision_probability;
+  last_counter_ = ledger_.counters();
   for (const std::string& name : ledger_.peers()) {
     if (Peer* p = peer(name)) {
       p->taken = ledger_.received(name);
@@ -88,6 +99,10 @@ void Station::start(const std::optional<std::string>& ledger_text, bool keyed, u
 
 std::string Station::ledgerText() {
   const auto lock = maps_.lock();
+  {
+    std::lock_guard<std::mutex> guard(mutex_);
+    ledger_.setCounters(last_counter_);
+  }
   return ledger_.toText();
 }
 
@@ -102,10 +117,25 @@ PlaceSummary Station::stored(const DetectionResult& result) {
     }
   }
   const uint64_t seq = ledger_.recordOwn(result.query_robot, result.query_id, result.query_index, unreachable);
+  const uint64_t next = maps_.team().robot(result.query_robot).map().nextId();
+  if (next + kIdBlock / 2 >= ledger_.idFloor(result.query_robot)) {
+    ledger_.setIdFloor(result.query_robot, next + kIdBlock);  // saved by the next work()
+    std::lock_guard<std::mutex> guard(mutex_);
+    ids_reserved_ = true;
+  }
   return summaryOf(seq);
 }
 
-void Station::mapReplaced(size_t robot) { ledger_.mapReplaced(robot); }
+void Station::mapReplaced(size_t robot) {
+  ledger_.mapReplaced(robot);
+  if (!started_) return;  // start() reserves
+  // A reset map would give its ids from 0 again: those its earlier keyframes had are kept.
+  KeyframeMap& map = maps_.team().robot(robot).map();
+  map.raiseNextId(ledger_.idFloor(robot));
+  ledger_.setIdFloor(robot, map.nextId() + kIdBlock);
+  std::lock_guard<std::mutex> guard(mutex_);
+  ids_reserved_ = true;
+}
 
 void Station::sentSummary(uint64_t bytes) {
   std::lock_guard<std::mutex> guard(mutex_);
@@ -295,7 +325,7 @@ bool Station::admit(const std::string& sender, const std::string& topic, uint64_
     const auto last = last_counter_.find(stream);
     if (last != last_counter_.end() && counter <= last->second) {
       ok = false;
-    } else if (last != last_counter_.end() || last_counter_.size() < 64 * (kMaxPeers + 1)) {
+    } else if (last != last_counter_.end() || last_counter_.size() < StationLedger::kMaxCounters) {
       last_counter_[stream] = counter;
     }
   }
@@ -344,6 +374,7 @@ Outbox Station::work() {
   std::deque<PeerLoop> loops;
   {
     std::lock_guard<std::mutex> guard(mutex_);
+    out.persist = std::exchange(ids_reserved_, false);
     requests.swap(requests_);
     replies.swap(replies_);
     loops.swap(loops_);

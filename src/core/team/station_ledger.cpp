@@ -223,6 +223,12 @@ std::map<std::string, PeerRuns> runsFromJson(const nlohmann::json& j) {
 
 }  // namespace
 
+void StationLedger::setIdFloor(size_t robot, uint64_t floor) {
+  if (robot >= robots_) throw InvalidInput("no robot " + std::to_string(robot) + " in the ledger");
+  if (id_floors_.size() < robots_) id_floors_.resize(robots_, 0);
+  id_floors_[robot] = floor;
+}
+
 std::string StationLedger::toText() const {
   nlohmann::json j;
   j["format"] = "mild_lcd station ledger 1";
@@ -250,6 +256,8 @@ std::string StationLedger::toText() const {
   nlohmann::json kept = nlohmann::json::array();
   for (const LoopKey& k : loops_order_) kept.push_back({k.station, k.robot, k.session, k.id, k.decider});
   j["loops_kept"] = std::move(kept);
+  j["id_floors"] = id_floors_;
+  j["counters"] = counters_;
   return j.dump();
 }
 
@@ -308,6 +316,13 @@ void StationLedger::fromText(const std::string& text) {
       if (loops_order.size() > kMaxLoopsKept) throw InvalidInput("the ledger keeps too many loops");
     }
     const uint64_t epoch = j.contains("epoch") ? j.at("epoch").get<uint64_t>() : 0;
+    // Absent from ledgers written before ids were reserved: none reserved.
+    std::vector<uint64_t> id_floors;
+    if (j.contains("id_floors")) id_floors = j.at("id_floors").get<std::vector<uint64_t>>();
+    if (id_floors.size() > robots_) throw InvalidInput("the ledger has another number of robots");
+    std::map<std::string, uint64_t> counters;
+    if (j.contains("counters")) counters = j.at("counters").get<std::map<std::string, uint64_t>>();
+    if (counters.size() > kMaxCounters) throw InvalidInput("the ledger keeps too many counters");
     own_ = std::move(own);
     numbered_ = std::move(numbered);
     received_ = std::move(received);
@@ -319,6 +334,8 @@ void StationLedger::fromText(const std::string& text) {
     loops_kept_ = std::move(loops_kept);
     loops_order_ = std::move(loops_order);
     epoch_ = epoch;  // the run that saved it, until beginRun
+    id_floors_ = std::move(id_floors);
+    counters_ = std::move(counters);
     run_start_ = own_.size();
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(std::string("the station ledger is malformed: ") + e.what());

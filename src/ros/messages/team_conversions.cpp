@@ -64,41 +64,51 @@ mild_lcd::PlaceSummary summaryToMsg(const mild::PlaceSummary& s) {
   return msg;
 }
 
-// The heartbeat's fields, the same on both sides.
-#define MILD_TEAM_STATUS_FIELDS(X)                                                                              \
-  X(station)                                                                                                    \
-  X(epoch) X(epoch_start) X(summaries) X(descriptor_bytes) X(peers) X(received) X(loops_received) X(loops_from) \
-      X(loops_epoch) X(summaries_in) X(summary_bytes_in) X(features_in) X(feature_bytes_in) X(loops_decided)    \
-          X(loops_found_late) X(refused)
-#define MILD_COPY_FIELD(f) to.f = from.f;
+namespace {
 
-mild::TeamStatus statusFromMsg(const mild_lcd::TeamStatus& from) {
-  mild::TeamStatus to;
-  MILD_TEAM_STATUS_FIELDS(MILD_COPY_FIELD)
+// The heartbeat's and the request's fields have the same names on both sides: one copy each way.
+template <class To, class From>
+To copyStatus(const From& from) {
+  To to;
+  to.station = from.station;
+  to.epoch = from.epoch;
+  to.epoch_start = from.epoch_start;
+  to.summaries = from.summaries;
+  to.descriptor_bytes = from.descriptor_bytes;
+  to.peers = from.peers;
+  to.received = from.received;
+  to.loops_received = from.loops_received;
+  to.loops_from = from.loops_from;
+  to.loops_epoch = from.loops_epoch;
+  to.summaries_in = from.summaries_in;
+  to.summary_bytes_in = from.summary_bytes_in;
+  to.features_in = from.features_in;
+  to.feature_bytes_in = from.feature_bytes_in;
+  to.loops_decided = from.loops_decided;
+  to.loops_found_late = from.loops_found_late;
+  to.refused = from.refused;
   return to;
 }
 
-mild_lcd::TeamStatus statusToMsg(const mild::TeamStatus& from) {
-  mild_lcd::TeamStatus to;
-  MILD_TEAM_STATUS_FIELDS(MILD_COPY_FIELD)
+template <class To, class From>
+To copyRequest(const From& from) {
+  To to;
+  to.from = from.from;
+  to.request_id = from.request_id;
+  to.kind = from.kind;
+  to.first = from.first;
+  to.count = from.count;
+  to.robot = from.robot;
+  to.id = from.id;
   return to;
 }
 
-#define MILD_TEAM_REQUEST_FIELDS(X) X(from) X(request_id) X(kind) X(first) X(count) X(robot) X(id)
+}  // namespace
 
-mild::TeamRequest requestFromMsg(const mild_lcd::TeamRequest& from) {
-  mild::TeamRequest to;
-  MILD_TEAM_REQUEST_FIELDS(MILD_COPY_FIELD)
-  return to;
-}
-
-mild_lcd::TeamRequest requestToMsg(const mild::TeamRequest& from) {
-  mild_lcd::TeamRequest to;
-  MILD_TEAM_REQUEST_FIELDS(MILD_COPY_FIELD)
-  return to;
-}
-
-#undef MILD_COPY_FIELD
+mild::TeamStatus statusFromMsg(const mild_lcd::TeamStatus& from) { return copyStatus<mild::TeamStatus>(from); }
+mild_lcd::TeamStatus statusToMsg(const mild::TeamStatus& from) { return copyStatus<mild_lcd::TeamStatus>(from); }
+mild::TeamRequest requestFromMsg(const mild_lcd::TeamRequest& from) { return copyRequest<mild::TeamRequest>(from); }
+mild_lcd::TeamRequest requestToMsg(const mild::TeamRequest& from) { return copyRequest<mild_lcd::TeamRequest>(from); }
 
 mild::TeamFeatures featuresReplyFromMsg(const mild_lcd::TeamFeatures& msg) {
   mild::TeamFeatures reply;

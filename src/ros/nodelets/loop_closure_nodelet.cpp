@@ -195,10 +195,14 @@ class LoopClosureNodelet : public nodelet::Nodelet {
         settings_.save_on_shutdown || settings_.load_on_start
             ? robots_.front()->store->directory() + "/" + settings_.team_station + mild::kTeamLedgerSuffix
             : "";
-    std::string key_file;  // ~team/key_file: "" runs the team without a key (warned about)
-    getPrivateNodeHandle().param<std::string>("team/key_file", key_file, "");
+    // ~team/key_file: "" runs the team without a key (warned about); ~team/station_key_file and
+    // ~team/roster_dir bind station names to keys of their own.
+    TeamLink::KeyFiles keys;
+    getPrivateNodeHandle().param<std::string>("team/key_file", keys.team, "");
+    getPrivateNodeHandle().param<std::string>("team/station_key_file", keys.station, "");
+    getPrivateNodeHandle().param<std::string>("team/roster_dir", keys.roster, "");
     team_link_ = std::make_unique<TeamLink>(
-        nh, settings_, shared_, shared_.team->names(), ledger, key_file,
+        nh, settings_, shared_, shared_.team->names(), ledger, keys,
         [this](const std::vector<size_t>& robots, const mild_lcd::LoopClosure::ConstPtr& msg) {
           for (size_t robot : robots) robots_.at(robot)->loop_pub.publish(msg);
           if (all_pub_) all_pub_.publish(msg);

@@ -193,9 +193,11 @@ void rejectUnknownParameters(const mild::ParameterSource& source) {
   visitSettings(scratch, [&](const char* name, auto&, const mild::Bounds&, const char*) { known.emplace_back(name); });
   // Read by libraries the node uses, from the same private namespace.
   known.emplace_back("diagnostic_period");
-  // Read by the team link itself (TeamLink, docs/multi_robot.md "The team key"): a path, no bound to
+  // Read by the team link itself (TeamLink, docs/multi_robot.md "The team key"): paths, no bound to
   // declare.
   known.emplace_back("team/key_file");
+  known.emplace_back("team/station_key_file");
+  known.emplace_back("team/roster_dir");
   // Written by the node's own dynamic_reconfigure server (~tuning): the runtime parameters, each
   // with its first '/' as '_'.
   for (std::string name : mild::runtimeParameterNames()) {

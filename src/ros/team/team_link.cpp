@@ -31,14 +31,13 @@ std::vector<std::string> wireNames(std::vector<std::string> names, const std::st
 }  // namespace
 
 TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
-                   std::vector<std::string> robot_names, std::string ledger_path, std::string key_file,
-                   PublishLoop publish)
+                   std::vector<std::string> robot_names, std::string ledger_path, KeyFiles keys, PublishLoop publish)
     : nh_(std::move(nh)),
       settings_(settings),
       shared_(shared),
       robot_names_(wireNames(std::move(robot_names), settings.team_station)),
       ledger_path_(std::move(ledger_path)),
-      key_file_(std::move(key_file)),
+      key_files_(std::move(keys)),
       publish_(std::move(publish)),
       station_(stationSettings(settings, robot_names_), *this),
       // Above every counter of this station's earlier runs (a run sends far fewer than a message a
@@ -75,12 +74,7 @@ ros::Subscriber TeamLink::subscribe(const std::string& name, uint32_t queue, uin
                                              << ros::message_traits::datatype<M>() << ")");
           return;
         }
-        bool mac_ok = true;
-        if (key_) {
-          const std::vector<uint8_t> bytes = macInput(*msg, name);
-          mac_ok = key_->verify(bytes.data(), bytes.size(), msg->mac.data(), msg->mac.size());
-        }
-        if (!station_.admit(senderOf(*msg), name, msg->counter, mac_ok)) {
+        if (!station_.admit(senderOf(*msg), name, msg->counter, authentic(*msg, name))) {
           ROS_WARN_STREAM_THROTTLE(10.0, "team link: a message on " << name << " claiming to be from '"
                                                                     << senderOf(*msg).substr(0, 64)
                                                                     << "' refused: no valid team key MAC, or a replay");
@@ -97,12 +91,12 @@ void TeamLink::start() {
   // at a time, and nothing started once stopped (the subscribers and the thread are theirs).
   std::lock_guard<std::mutex> lifecycle(lifecycle_);
   if (stopped_) return;
-  if (!key_file_.empty()) {
-    key_ = mild::TeamKey::fromFile(key_file_);
-  } else {
+  credentials_ =
+      mild::TeamCredentials::fromFiles(key_files_.team, key_files_.station, key_files_.roster, settings_.team_station);
+  if (!credentials_.any()) {
     ROS_WARN_STREAM(
-        "team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject loops "
-        "and take this station's numbers (docs/multi_robot.md, \"The team key\")");
+        "team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject "
+        "loops and take this station's numbers (docs/multi_robot.md, \"The team key\")");
   }
   std::optional<std::string> ledger;
   if (!ledger_path_.empty() && settings_.load_on_start &&
@@ -112,10 +106,12 @@ void TeamLink::start() {
     const mild::ConfinedFile file = mild::fileAtPath(ledger_path_);
     if (file.exists()) ledger = file.readText();
   }
-  station_.start(ledger, key_.has_value());
+  station_.start(ledger, credentials_.any());
   const std::string& me = settings_.team_station;
   summaries_pub_ = nh_.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000);
   status_pub_ = nh_.advertise<mild_lcd::TeamStatus>("/mild_team/status", 10);
+  started_ = true;
+  persist();  // the ids this run reserved (Station::start), before its first keyframe
   const uint64_t summary_bytes = mild::Station::maxSummaryBytes(static_cast<size_t>(settings_.team_summary_bytes));
   const auto summary_in = [this](bool backfill) {
     return [this, backfill](const mild_lcd::PlaceSummary& m) { station_.receive(summaryFromMsg(m), backfill); };
@@ -142,7 +138,6 @@ void TeamLink::start() {
         station_.receive(peerLoopFromMsg(m, rules));
       }));
   thread_ = std::thread([this] { run(); });
-  started_ = true;
 }
 
 void TeamLink::stop() {
@@ -181,7 +176,7 @@ void TeamLink::persist() {
   try {
     save();
   } catch (const std::exception& e) {
-    ROS_WARN_STREAM_THROTTLE(10.0, "team link: could not save the station ledger after a loop: " << e.what());
+    ROS_WARN_STREAM_THROTTLE(10.0, "team link: could not save the station ledger: " << e.what());
   }
 }
 
@@ -193,14 +188,21 @@ void TeamLink::stored(const mild::DetectionResult& result) {
   station_.sentSummary(ros::serialization::serializationLength(msg));
 }
 
+// The MAC field (TeamCredentials::seal): over the topic and the message with that field empty.
 template <class M>
 void TeamLink::sign(M& msg, const std::string& topic) {
   msg.counter = next_counter_++;
   msg.mac.clear();
-  if (!key_) return;
+  if (!credentials_.any()) return;
   const std::vector<uint8_t> bytes = macInput(msg, topic);
-  const mild::TeamKey::Mac mac = key_->mac(bytes.data(), bytes.size());
-  msg.mac.assign(mac.begin(), mac.end());
+  msg.mac = credentials_.seal(bytes.data(), bytes.size());
+}
+
+template <class M>
+bool TeamLink::authentic(const M& msg, const std::string& topic) const {
+  if (!credentials_.any()) return true;
+  const std::vector<uint8_t> bytes = macInput(msg, topic);
+  return credentials_.verify(senderOf(msg), bytes.data(), bytes.size(), msg.mac);
 }
 
 // A peer's inbox before the thread advertised it (shortly after its first sight): what would go
@@ -261,6 +263,9 @@ void TeamLink::send(mild::Outbox out) {
 void TeamLink::diagnose(diagnostic_updater::DiagnosticStatusWrapper& stat) {
   const mild::StationReport report = station_.report();
   for (const auto& [key, value] : report.values) stat.add(key, value);
+  const mild::StationRoster* roster = credentials_.roster();
+  stat.add("station names bound to keys", roster ? "yes: " + std::to_string(roster->size()) + " stations in the roster"
+                                                 : std::string("no (set ~team/roster_dir)"));
   stat.summary(report.warn ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK,
                report.summary);
 }

@@ -10,6 +10,8 @@
 // type are checked before it is deserialised. Team key (~team/key_file): every message sent carries
 // a counter and an HMAC-SHA256 under the key over its topic and content; one received without a
 // valid MAC, or not above its sender's last counter on its topic, is refused before it is read.
+// With a roster (~team/roster_dir, ~team/station_key_file), it also carries its sender's Ed25519
+// signature, checked against the roster's key for the station it names.
 
 #include <atomic>
 #include <functional>
@@ -28,7 +30,7 @@
 #include "mild_lcd/ros/detection/shared_detector.hpp"
 #include "mild_lcd/ros/settings/node_settings.hpp"
 #include "mild_lcd/team/station.hpp"
-#include "mild_lcd/team/team_key.hpp"
+#include "mild_lcd/team/station_identity.hpp"
 
 namespace mild_lcd {
 
@@ -37,11 +39,17 @@ class TeamLink : private mild::StationMaps {
   // Publishes a loop on each of these robots' loop_closure (and once on loop_closures_all).
   using PublishLoop = std::function<void(const std::vector<size_t>& robots, const mild_lcd::LoopClosure::ConstPtr&)>;
 
-  // ledger_path: where the ledger is saved beside the maps (empty: never). key_file: the team key
-  // (~team/key_file), read at start(); empty: no key, and anyone who can publish on /mild_team/ can
-  // inject loops (warned about at start-up and in diagnostics). Throws InvalidInput for a bad name.
+  // The keys, read at start(): the team key (~team/key_file; empty: none, and anyone who can publish
+  // on /mild_team/ can inject loops: warned about at start-up and in diagnostics), and this
+  // station's private key and the team's roster of public keys (both or neither: names bound).
+  struct KeyFiles {
+    std::string team, station, roster;
+  };
+
+  // ledger_path: where the ledger is saved beside the maps (empty: never). Throws InvalidInput for a
+  // bad station name.
   TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetector& shared,
-           std::vector<std::string> robot_names, std::string ledger_path, std::string key_file, PublishLoop publish);
+           std::vector<std::string> robot_names, std::string ledger_path, KeyFiles keys, PublishLoop publish);
   ~TeamLink() override;
 
   // After the maps were loaded: reads the key and the ledger when its file exists (a restart),
@@ -69,6 +77,8 @@ class TeamLink : private mild::StationMaps {
   template <class M>
   void sign(M& msg, const std::string& topic);
   template <class M>
+  bool authentic(const M& msg, const std::string& topic) const;
+  template <class M>
   void sendTo(const std::string& peer, const std::string& name, M msg);
   template <class M>
   ros::Subscriber subscribe(const std::string& name, uint32_t queue, uint64_t max_bytes,
@@ -78,10 +88,11 @@ class TeamLink : private mild::StationMaps {
   const NodeSettings settings_;
   SharedDetector& shared_;
   const std::vector<std::string> robot_names_;
-  const std::string ledger_path_, key_file_;
+  const std::string ledger_path_;
+  const KeyFiles key_files_;
   PublishLoop publish_;
   mild::Station station_;
-  std::optional<mild::TeamKey> key_;    // read at start(), then only read
+  mild::TeamCredentials credentials_;   // read at start(), then only read
   std::atomic<uint64_t> next_counter_;  // messages sent: from the wall clock's ns at construction
   std::mutex lifecycle_;                // start() and stop(), one at a time
   bool stopped_ = false;                // under lifecycle_
