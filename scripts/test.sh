@@ -63,8 +63,9 @@ if [[ -z "${MILD_SANITIZE:-}" ]]; then
   # counted from its JUnit file.
   "$REPO/test/team/three_hosts.sh" --junit "$BUILD_DIR/test_results/mild_lcd/team-three_hosts.xml" \
     || echo "[mild_lcd] the three-host team test failed" >&2
-  # The same with one team key on every station (every team message authenticated; ~5 min).
-  "$REPO/test/team/three_hosts.sh" --key --junit "$BUILD_DIR/test_results/mild_lcd/team-three_hosts_key.xml" \
+  # The same with one team key on every station and station names bound to keys of their own
+  # (every team message authenticated and signed; ~5 min).
+  "$REPO/test/team/three_hosts.sh" --key --roster --junit "$BUILD_DIR/test_results/mild_lcd/team-three_hosts_key.xml" \
     || echo "[mild_lcd] the three-host team test with a key failed" >&2
 fi
 if [[ -z "${MILD_SANITIZE:-}" ]]; then

@@ -35,7 +35,7 @@
 # on two cores. Nothing leaves the namespaces: every address is 127.0.0.1 or 10.231.0.x inside
 # them, and nothing is routed out. Every namespace (with its veths) and every process in them is
 # removed on exit, also on failure or Ctrl-C.
-#   test/team/three_hosts.sh [--junit FILE] [--keep] [--key]
+#   test/team/three_hosts.sh [--junit FILE] [--keep] [--key] [--roster]
 #     --junit FILE  also write the verdict as a JUnit file of one test case,
 #                   team.ThreeHostsWithAnOutageAndARestart
 #                   (scripts/test.sh counts it from its test_results folder)
@@ -43,6 +43,10 @@
 #     --key         every station with one team key (~team/key_file: a file of the work folder, mode
 #                   0600, made by openssl rand -hex 32): every team message authenticated, the
 #                   restarted station's included; the JUnit test case is then ...WithAKey
+#     --roster      with --key: station names bound to keys as well (each station's Ed25519 key,
+#                   ~team/station_key_file, and the roster of the three, ~team/roster_dir, made by
+#                   openssl genpkey in the work folder): every message signed by its station; the
+#                   JUnit test case is then ...WithAKeyAndARoster
 #   MILD_TEAM_BAGS=DIR             make the bags there once and reuse them (default: in the work folder);
 #                                  empty it when mild_make_bag's features change
 #   MILD_TEAM_STATION_CMD='...'    how a station starts (see STATION_CMD below)
@@ -60,16 +64,21 @@ JUNIT=""
 KEEP=0
 KEYED=0
 KEY_FILE=""
+ROSTER=0
+ROSTER_DIR=""
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --junit) JUNIT="$2"; shift 2 ;;
     --keep) KEEP=1; shift ;;
     --key) KEYED=1; shift ;;
+    --roster) ROSTER=1; shift ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) echo "three_hosts.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+[[ $ROSTER == 1 && $KEYED == 0 ]] && { echo "three_hosts.sh: --roster goes with --key" >&2; exit 2; }
 [[ $KEYED == 1 ]] && TEST_NAME="${TEST_NAME}WithAKey"
+[[ $ROSTER == 1 ]] && TEST_NAME="${TEST_NAME}AndARoster"
 
 # Schedule, in seconds from t0 (when every station, player and recorder is ready).
 KEYFRAMES_PER_SECOND="${MILD_TEAM_KEYFRAMES_PER_SECOND:-1}"
@@ -106,10 +115,11 @@ STATUS_TOPIC=/mild_team/status
 
 # How a station starts, expanded (eval) into a command line run in the station's host, with
 # STATION, ROBOTS ("robot1 robot2"), MAPS (an empty folder of its own in the work folder: the
-# launch's default is under $HOME) and MILD_LAUNCH_PREFIX (scripts/test.sh sets it under
+# launch's default is under $HOME), STATION_KEY (its private key with --roster, else "") and
+# MILD_LAUNCH_PREFIX (scripts/test.sh sets it under
 # AddressSanitizer). Each process also gets a ROS_HOME of its own. It is stopped with SIGINT.
 # shellcheck disable=SC2016  # expanded later, by eval
-DEFAULT_STATION_CMD='roslaunch --wait mild_lcd mild_lcd_base_station.launch station:="$STATION" robots:="$ROBOTS" database_dir:="$MAPS" key_file:="$KEY_FILE" launch_prefix:="${MILD_LAUNCH_PREFIX:-}"'
+DEFAULT_STATION_CMD='roslaunch --wait mild_lcd mild_lcd_base_station.launch station:="$STATION" robots:="$ROBOTS" database_dir:="$MAPS" key_file:="$KEY_FILE" station_key_file:="$STATION_KEY" roster_dir:="$ROSTER_DIR" launch_prefix:="${MILD_LAUNCH_PREFIX:-}"'
 STATION_CMD="${MILD_TEAM_STATION_CMD:-$DEFAULT_STATION_CMD}"
 # The reference: one node, one map per robot, no station. By default each keyframe asks every
 # other robot's map: with the node's default (one other map per keyframe, in turn) it asks a given
@@ -221,6 +231,15 @@ if [[ $KEYED == 1 ]]; then
   KEY_FILE="$WORK/team.key"
   (umask 077 && openssl rand -hex 32 >"$KEY_FILE")
   echo "team key: $KEY_FILE"
+fi
+if [[ $ROSTER == 1 ]]; then
+  ROSTER_DIR="$WORK/roster"
+  mkdir -p "$ROSTER_DIR" "$WORK/station_keys"
+  for station in "${STATIONS[@]}"; do
+    (umask 077 && openssl genpkey -algorithm ed25519 -out "$WORK/station_keys/$station.pem")
+    openssl pkey -in "$WORK/station_keys/$station.pem" -pubout -out "$ROSTER_DIR/$station.pub"
+  done
+  echo "station keys: $WORK/station_keys, roster: $ROSTER_DIR"
 fi
 BAGS="${MILD_TEAM_BAGS:-$WORK/bags}"
 mkdir -p "$BAGS"
@@ -498,8 +517,9 @@ for i in 0 1 2; do
 done
 start_station() {  # HOST_INDEX NAME: station STATIONS[HOST_INDEX] in its host, as process NAME
   local i=$1 station_argv=()
-  # shellcheck disable=SC2034  # ROBOTS and MAPS are read by the eval of STATION_CMD
-  local STATION=${STATIONS[i]} ROBOTS=${STATION_ROBOTS[i]} MAPS="$WORK/maps/${STATIONS[i]}"
+  # shellcheck disable=SC2034  # ROBOTS, MAPS and STATION_KEY are read by the eval of STATION_CMD
+  local STATION=${STATIONS[i]} ROBOTS=${STATION_ROBOTS[i]} MAPS="$WORK/maps/${STATIONS[i]}" STATION_KEY=""
+  [[ $ROSTER == 1 ]] && STATION_KEY="$WORK/station_keys/${STATIONS[i]}.pem"
   mkdir -p "$MAPS"
   eval "station_argv=($STATION_CMD)"
   run_in "${HOST_NS[i]}" "$2" "${HOST_IPS[i]}" "$MASTER_URI" "${station_argv[@]}"

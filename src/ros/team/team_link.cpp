@@ -82,8 +82,11 @@ ros::Subscriber TeamLink::subscribe(const std::string& name, uint32_t queue, uin
         }
         handle(*msg);
       };
-  return nh_.subscribe<topic_tools::ShapeShifter>(name, queue, take, ros::VoidConstPtr(),
-                                                  ros::TransportHints().tcpNoDelay());
+  ros::SubscribeOptions options;
+  options.initByFullCallbackType<const topic_tools::ShapeShifter::ConstPtr&>(name, queue, take);
+  options.transport_hints = ros::TransportHints().tcpNoDelay();
+  options.callback_queue = &queue_;
+  return nh_.subscribe(options);
 }
 
 void TeamLink::start() {
@@ -137,6 +140,8 @@ void TeamLink::start() {
                                   r.decision_probability};
         station_.receive(peerLoopFromMsg(m, rules));
       }));
+  spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
+  spinner_->start();
   thread_ = std::thread([this] { run(); });
 }
 
@@ -158,6 +163,7 @@ void TeamLink::stop() {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   for (ros::Subscriber& s : subscribers_) s.shutdown();
+  if (spinner_) spinner_->stop();
   station_.halt();
   if (thread_.joinable()) thread_.join();
 }

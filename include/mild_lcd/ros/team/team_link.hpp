@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 
 #include "mild_lcd/LoopClosure.h"
@@ -99,6 +100,10 @@ class TeamLink : private mild::StationMaps {
   std::atomic<bool> started_{false};
   std::map<std::string, std::map<std::string, ros::Publisher>> to_;  // per peer, per inbox (thread only)
   ros::Publisher summaries_pub_, status_pub_;
+  // The team's messages are handled on a queue and thread of their own: a flood of them (forged, or
+  // a peer catching up) never waits in front of the robots' keyframes on the nodelet's threads.
+  ros::CallbackQueue queue_;
+  std::unique_ptr<ros::AsyncSpinner> spinner_;
   std::vector<ros::Subscriber> subscribers_;
   std::thread thread_;
 };
