@@ -28,6 +28,7 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <set>
 #include <thread>
@@ -103,6 +104,28 @@ std::vector<double> answerTimes(const std::vector<mild_lcd::Keyframe>& keyframes
   return ms;
 }
 
+// With MILD_TEAM_TEST_KEY set (team_hostile_key.test), the hostile peer is a member: it holds the
+// station's team key, so its messages carry a valid MAC and a fresh counter, and what refuses them
+// is the station's checks behind the key. Without it, they go as built.
+template <class M>
+void send(const ros::Publisher& pub, const M& msg) {
+  static const std::optional<mild::TeamCredentials> credentials = []() -> std::optional<mild::TeamCredentials> {
+    const char* key = std::getenv("MILD_TEAM_TEST_KEY");
+    if (!key || !*key) return std::nullopt;
+    return mild::TeamCredentials::fromFiles(key, "", "", "mallory");
+  }();
+  static std::atomic<uint64_t> counter{1};
+  if (!credentials) {
+    pub.publish(msg);
+    return;
+  }
+  M sealed = msg;
+  sealed.counter = counter++;
+  const std::vector<uint8_t> bytes = mild_lcd::macInput(sealed, pub.getTopic());
+  sealed.mac = credentials->seal(bytes.data(), bytes.size());
+  pub.publish(sealed);
+}
+
 TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
   const std::vector<mild_lcd::Keyframe> keyframes = sampleKeyframes();
   ASSERT_EQ(keyframes.size(), 150u);
@@ -123,7 +146,7 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
       mild_lcd::TeamStatus s;
       s.station = "mallory";
       s.descriptor_bytes = 32;
-      status_pub.publish(s);
+      send(status_pub, s);
       ros::WallDuration(0.5).sleep();
     }
   });
@@ -144,7 +167,7 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
       r.kind = id % 7 == 0 ? 9 : mild_lcd::TeamRequest::FEATURES;
       r.robot = id % 3 == 0 ? "nobody" : "robot1";
       r.id = id % 2 == 0 ? 5 : 1000000 + id;
-      request_pub.publish(r);
+      send(request_pub, r);
       ++sent_requests;
       if (id % 10 == 0) {
         mild_lcd::PlaceSummary s;
@@ -154,7 +177,7 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
         const int kind = static_cast<int>((id / 10) % 3);
         s.descriptor_bytes = kind == 0 ? 64 : 32;                                         // another width
         s.descriptors.assign(kind == 1 ? 33 : (kind == 2 ? 32 * 20000 : 64 * 10), 0xA5);  // torn, oversized
-        summary_pub.publish(s);
+        send(summary_pub, s);
         ++sent_summaries;
       }
       ros::WallDuration(0.0005).sleep();
@@ -241,7 +264,7 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
     s.loops_received = {0};
     s.loops_from = {loops_from};
     for (int i = 0; i < 4; ++i) {
-      status_pub.publish(s);
+      send(status_pub, s);
       ros::WallDuration(0.25).sleep();
     }
   };
@@ -264,7 +287,7 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   loop.loop.query_station = "alpha";
   loop.loop.query_robot = "robot1";
   loop.loop.query_id = sample.front().id;
-  loop_pub.publish(loop);
+  send(loop_pub, loop);
   mild_lcd::PlaceSummary big;  // well formed but for a megabyte name
   big.station = "mallory";
   big.seq = 0;
@@ -273,7 +296,7 @@ TEST(HostilePeer, ClaimsNoPeerCanMakeNeitherStallNorGrowTheStation) {
   big.descriptors.assign(32 * 10, 0xA5);
   big.known_stations = {std::string(1000000, 'x')};
   big.known_counts = {0};
-  summary_pub.publish(big);
+  send(summary_pub, big);
   ros::WallDuration(0.5).sleep();
   store(10);  // 160 numbered
   claim(160 + 5000, 0);
@@ -335,7 +358,7 @@ TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
       s.station = "mallory";
       s.summaries = 1;
       s.descriptor_bytes = 32;
-      status_pub.publish(s);
+      send(status_pub, s);
       ros::WallDuration(0.25).sleep();
     }
   });
@@ -349,7 +372,7 @@ TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
   for (size_t i = 0; i < 32 * 50; ++i) summary.descriptors.push_back(static_cast<uint8_t>((i * 131 + 7) % 251));
   const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(20.0);
   while (taken_from_mallory() < 1 && ros::WallTime::now() < end) {
-    summary_pub.publish(summary);
+    send(summary_pub, summary);
     ros::WallDuration(0.5).sleep();
   }
   ASSERT_EQ(taken_from_mallory(), 1u) << "mallory's well-formed summary was not taken";
@@ -421,11 +444,11 @@ TEST(HostilePeer, LoopsNotDecidedOnWhatTheStationHoldsAreRefusedAndCounted) {
     l.loop.candidates[0].relative_translation.z = std::numeric_limits<double>::infinity();
   });
   for (const auto& [what, l] : forged) {
-    loop_pub.publish(l);
+    send(loop_pub, l);
     ros::WallDuration(0.05).sleep();
   }
   const uint64_t honest_seq = forged.size() - 1;
-  loop_pub.publish(honest(honest_seq));
+  send(loop_pub, honest(honest_seq));
   const auto from_peers = [&] {
     std::vector<mild_lcd::LoopClosure> loops;
     for (const auto& m : published.messages()) {
@@ -516,7 +539,7 @@ TEST(HostilePeer, AnOversizedMessageIsRefusedBeforeItIsDeserialised) {
     // The peak is measured from here (writing 5 to clear_refs resets it; root only).
     std::ofstream(("/proc/" + std::to_string(station) + "/clear_refs").c_str()) << "5";
     peak_before = procStatusBytes(station, "VmHWM");
-    status_pub.publish(huge);
+    send(status_pub, huge);
   }
   ros::WallDuration(3.0).sleep();
   const uint64_t refused_after = lastRefused();
@@ -808,7 +831,7 @@ TEST(TeamKey, AStationWithARosterTakesANameOnlyWithItsKey) {
   fs::copy_file(root / "mallory.pub", root / "mallory_roster" / "mallory.pub");
   const mild::TeamCredentials lima = credentials("lima"), mallory = credentials("mallory");
   uint64_t counter = 1;
-  const auto send = [&](const std::string& name, const mild::TeamCredentials& by) {
+  const auto beat = [&](const std::string& name, const mild::TeamCredentials& by) {
     mild_lcd::TeamStatus st;
     st.station = name;
     st.epoch = 7;
@@ -821,8 +844,8 @@ TEST(TeamKey, AStationWithARosterTakesANameOnlyWithItsKey) {
   };
   const uint64_t refused_before = kilo().refused;
   for (int i = 0; i < 20; ++i) {
-    send("lima", mallory);     // in lima's name, mallory's signature
-    send("mallory", mallory);  // a name the roster does not hold
+    beat("lima", mallory);     // in lima's name, mallory's signature
+    beat("mallory", mallory);  // a name the roster does not hold
     ros::WallDuration(0.05).sleep();
   }
   ros::WallDuration(2.5).sleep();
@@ -830,7 +853,7 @@ TEST(TeamKey, AStationWithARosterTakesANameOnlyWithItsKey) {
   EXPECT_GE(last.refused - refused_before, 40u) << "the impostor's heartbeats were not all counted";
   EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "lima"), 0) << "mallory made lima a peer";
   EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "mallory"), 0) << "a name not in the roster was taken";
-  send("lima", lima);
+  beat("lima", lima);
   const ros::WallTime joined_by = ros::WallTime::now() + ros::WallDuration(10.0);
   while (ros::WallTime::now() < joined_by) {
     last = kilo();
