@@ -905,6 +905,10 @@ TEST_F(HostileFixture, AMalformedHeartbeatOrASummaryOfAnotherWidthIsRefused) {
   station().receive(loopOf("charlie", 0, 1));
   EXPECT_TRUE(work().taken.empty());
   EXPECT_EQ(refusedInAll(), before + 2) << "its heartbeat and its loop";
+  EXPECT_EQ(figure(station(), "refused from no peer") > 0, true);
+  for (const auto& [key, value] : station().report().values) {
+    EXPECT_NE(key.rfind("charlie:", 0), 0u) << "a malformed heartbeat made a peer (a slot of the 64): " << key;
+  }
 
   // A summary whose descriptors are 64 bytes wide (alpha's are 32): refused, not taken.
   PlaceSummary wide = summaryOf("bravo", 3, 203);

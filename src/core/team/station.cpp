@@ -222,6 +222,17 @@ bool Station::wellFormed(const PlaceSummary& s) const {
 void Station::receive(PlaceSummary summary, bool backfill) {
   if (summary.station == settings_.station) return;  // our own, broadcast
   std::lock_guard<std::mutex> guard(mutex_);
+  // A malformed message makes no peer (forged names would fill the table): it is counted against
+  // the peer it names, if one, else against none.
+  if (!wellFormed(summary)) {
+    const auto it = peers_.find(summary.station);
+    if (it != peers_.end()) {
+      ++it->second.summaries_in;
+      it->second.summary_bytes_in += summary.wire_bytes;
+    }
+    refuse(summary.station);
+    return;
+  }
   Peer* p = peer(summary.station);
   if (!p) {
     ++refused_;
@@ -229,10 +240,6 @@ void Station::receive(PlaceSummary summary, bool backfill) {
   }
   ++p->summaries_in;
   p->summary_bytes_in += summary.wire_bytes;
-  if (!wellFormed(summary)) {
-    ++p->refused;
-    return;
-  }
   if (!seeRun(*p, summary.epoch, summary.epoch_start) || summary.seq < p->taken) {
     ++p->duplicates;  // of a run it left, or taken already
     return;
@@ -254,11 +261,15 @@ void Station::receive(PlaceSummary summary, bool backfill) {
 void Station::receive(const TeamStatus& msg, uint64_t wire_bytes) {
   if (msg.station == settings_.station) return;
   std::lock_guard<std::mutex> guard(mutex_);
-  Peer* p = peer(msg.station);
-  if (!p || wire_bytes > kMaxStatusBytes || msg.peers.size() != msg.received.size() ||
+  if (wire_bytes > kMaxStatusBytes || msg.peers.size() != msg.received.size() ||
       msg.peers.size() != msg.loops_received.size() || msg.loops_from.size() > msg.peers.size() ||
       msg.loops_epoch.size() > msg.peers.size()) {
-    refuse(msg.station);
+    refuse(msg.station);  // makes no peer
+    return;
+  }
+  Peer* p = peer(msg.station);
+  if (!p) {
+    ++refused_;
     return;
   }
   if (!seeRun(*p, msg.epoch, msg.epoch_start)) return;  // a run it left
