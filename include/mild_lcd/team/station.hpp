@@ -110,6 +110,7 @@ class Station {
   void start(const std::optional<std::string>& ledger_text, bool keyed, uint64_t epoch = StationLedger::drawEpoch());
   bool started() const { return started_; }
   uint64_t epoch() const { return epoch_; }
+  int descriptorBytes() const { return descriptor_bytes_; }  // the maps' width, as of start()
   // The ledger as text (takes the detector lock).
   std::string ledgerText();
 

@@ -257,7 +257,7 @@ void TeamLink::send(mild::Outbox out) {
   }
   for (const auto& [peer, r] : out.requests) sendTo(peer, "requests", requestToMsg(r));
   for (const auto& [peer, s] : out.summaries) sendTo(peer, "summaries", summaryToMsg(s));
-  const int width = shared_.team->params().features.descriptorBytes();
+  const int width = station_.descriptorBytes();  // read at start(): params() needs the detector lock
   for (const auto& [peer, f] : out.features) sendTo(peer, "features", featuresReplyToMsg(f, width));
   if (out.status) {
     mild_lcd::TeamStatus status = statusToMsg(*out.status);
