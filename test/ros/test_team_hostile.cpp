@@ -821,7 +821,10 @@ TEST(TeamKey, AStationWithARosterTakesANameOnlyWithItsKey) {
   while (kilo().station.empty() && ros::WallTime::now() < heard_by) ros::WallDuration(0.1).sleep();
   ASSERT_EQ(kilo().station, "kilo");
   EXPECT_EQ(kilo().mac.size(), 96u) << "the team MAC and kilo's signature";
-  ASSERT_TRUE(waitForSubscriber(status_pub, 30.0));
+  // Two subscribers: this test's own log, and kilo (the first alone would not mean kilo hears us).
+  const ros::WallTime connected_by = ros::WallTime::now() + ros::WallDuration(30.0);
+  while (status_pub.getNumSubscribers() < 2 && ros::WallTime::now() < connected_by) ros::WallDuration(0.05).sleep();
+  ASSERT_GE(status_pub.getNumSubscribers(), 2u) << "kilo never subscribed to the heartbeats";
   const auto credentials = [&](const std::string& signer) {
     return mild::TeamCredentials::fromFiles(key, (root / (signer + ".pem")).string(),
                                             (root / (signer == "mallory" ? "mallory_roster" : "roster")).string(),
@@ -848,14 +851,24 @@ TEST(TeamKey, AStationWithARosterTakesANameOnlyWithItsKey) {
     beat("mallory", mallory);  // a name the roster does not hold
     ros::WallDuration(0.05).sleep();
   }
-  ros::WallDuration(2.5).sleep();
+  // kilo reports what it refused in its next heartbeats (every second; later on a loaded machine).
   mild_lcd::TeamStatus last = kilo();
+  const ros::WallTime counted_by = ros::WallTime::now() + ros::WallDuration(15.0);
+  while (last.refused - refused_before < 40u && ros::WallTime::now() < counted_by) {
+    ros::WallDuration(0.1).sleep();
+    last = kilo();
+  }
   EXPECT_GE(last.refused - refused_before, 40u) << "the impostor's heartbeats were not all counted";
   EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "lima"), 0) << "mallory made lima a peer";
   EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "mallory"), 0) << "a name not in the roster was taken";
-  beat("lima", lima);
-  const ros::WallTime joined_by = ros::WallTime::now() + ros::WallDuration(10.0);
+  // lima's own heartbeats, once a second as a station sends them, until kilo lists lima.
+  const ros::WallTime joined_by = ros::WallTime::now() + ros::WallDuration(20.0);
+  ros::WallTime next_beat;
   while (ros::WallTime::now() < joined_by) {
+    if (ros::WallTime::now() >= next_beat) {
+      beat("lima", lima);
+      next_beat = ros::WallTime::now() + ros::WallDuration(1.0);
+    }
     last = kilo();
     if (std::count(last.peers.begin(), last.peers.end(), "lima") > 0) break;
     ros::WallDuration(0.1).sleep();
