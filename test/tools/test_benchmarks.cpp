@@ -1,6 +1,10 @@
 // The benchmarks as a user runs them, on tiny inputs: they finish, and their --json line carries
 // the figures docs/speed.md reports. (Their speed is not tested here: benchmarks measure, tests check.)
 #include <gtest/gtest.h>
+#include <cctype>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -46,6 +50,31 @@ TEST(MildBenchTeam, ReportsEachTeamSizeAgainstTheFirstAndFindsTheOtherRobotsPlac
       mild::test::runCommand(std::string(MILD_BENCH_TEAM_BIN) + " --walk " + kSample + " --robots 1,2 --keyframes 5");
   EXPECT_EQ(short_team.status, 2) << "a team of two needs two walks: " << short_team.output;
   EXPECT_NE(short_team.output.find("needs as many --walk"), std::string::npos) << short_team.output;
+}
+
+// One row per ledger: the loops held, its text's bytes (growing with the loops), the copy made
+// under the detector lock and the text made after it; a count beyond what a ledger keeps is refused.
+TEST(MildBenchLedger, ReportsTheCopyAndTheTextOfEachLedger) {
+  const auto run = mild::test::runCommand(std::string(MILD_BENCH_LEDGER_BIN) +
+                                          " --loops 10,1000 --own 50 --announced 50 --repeats 1");
+  ASSERT_EQ(run.status, 0) << run.output;
+  std::istringstream lines(run.output);
+  std::vector<std::vector<double>> rows;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty() || !std::isdigit(static_cast<unsigned char>(line[0]))) continue;
+    std::vector<double> row;
+    std::istringstream cells(line);
+    for (std::string cell; std::getline(cells, cell, '|');) row.push_back(std::stod(cell));
+    rows.push_back(row);
+  }
+  ASSERT_EQ(rows.size(), 2u) << run.output;
+  EXPECT_EQ(rows[0][0], 10.0);
+  EXPECT_EQ(rows[1][0], 1000.0);
+  EXPECT_GT(rows[1][1], rows[0][1] + 990 * 20) << "each loop held is in the text";
+  EXPECT_GT(rows[1][2], 0.0);
+  EXPECT_GT(rows[1][3], 0.0);
+  const auto beyond = mild::test::runCommand(std::string(MILD_BENCH_LEDGER_BIN) + " --loops 100001");
+  EXPECT_EQ(beyond.status, 2) << beyond.output;
 }
 
 TEST(MildBenchScale, ReportsEveryColumnPerSize) {

@@ -111,7 +111,7 @@ class Station {
   bool started() const { return started_; }
   uint64_t epoch() const { return epoch_; }
   int descriptorBytes() const { return descriptor_bytes_; }  // the maps' width, as of start()
-  // The ledger as text (takes the detector lock).
+  // The ledger as text (takes the detector lock for a copy of it, not for making the text).
   std::string ledgerText();
 
   // Under the detector lock, right after a keyframe was stored: its summary to send to every station.

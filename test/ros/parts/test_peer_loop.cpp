@@ -123,13 +123,15 @@ TEST(PeerLoop, EachContentAPeerCouldBreakIsRefusedWithItsReason) {
       {"relative pose is not finite", [](L& l) { l.loop.candidates[0].reprojection_error = -1.0; }},
       {"do not pair up", [](L& l) { l.loop.candidates[0].inlier_candidate_indices.pop_back(); }},
       {"do not pair up", [](L& l) { l.loop.candidates[0].inlier_query_pixels.pop_back(); }},
-      {"too many", [](L& l) {
+      {"too many",
+       [](L& l) {
          l.loop.candidates[0].inlier_query_indices.assign(1001, 0);
          l.loop.candidates[0].inlier_candidate_indices.assign(1001, 0);
          l.loop.candidates[0].inlier_query_pixels.clear();
          l.loop.candidates[0].inlier_candidate_pixels.clear();
        }},
-      {"correspondences are not finite", [](L& l) { l.loop.candidates[0].inlier_candidate_pixels[1] = static_cast<float>(kNaN); }},
+      {"correspondences are not finite",
+       [](L& l) { l.loop.candidates[0].inlier_candidate_pixels[1] = static_cast<float>(kNaN); }},
   };
   for (const auto& [reason, change] : cases) {
     const std::string problem = problemAfter(change);
