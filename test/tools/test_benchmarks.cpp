@@ -1,5 +1,6 @@
-// The benchmarks as a user runs them, on tiny inputs: they finish, and their --json line carries
-// the figures docs/speed.md reports. (Their speed is not tested here: benchmarks measure, tests check.)
+// The benchmarks as a user runs them, on tiny inputs: they finish, and their output (a --json line,
+// or mild_bench_ledger's table) carries the figures docs/speed.md and docs/multi_robot.md report.
+// (Their speed is not tested here: benchmarks measure, tests check.)
 #include <gtest/gtest.h>
 #include <cctype>
 #include <sstream>

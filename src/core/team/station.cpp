@@ -99,8 +99,7 @@ void Station::start(const std::optional<std::string>& ledger_text, bool keyed, u
 
 // The ledger is guarded by the detector lock (the keyframe path numbers its keyframes in it): it is
 // copied under that lock and its text made after the lock is released, so that a robot's keyframe
-// waits for the copy only (mild_bench_ledger: 0.6 ms against the text's 9 ms with 1,000 loops held,
-// 20 against 55 ms at the 100,000 kept).
+// waits for the copy only (mild_bench_ledger; docs/multi_robot.md, "Limits", has its figures).
 std::string Station::ledgerText() {
   const StationLedger copy = [this] {
     const auto lock = maps_.lock();
