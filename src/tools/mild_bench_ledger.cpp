@@ -3,7 +3,8 @@
 // a robot's keyframe waits for whatever part of the save happens under that lock. The station
 // copies the ledger under the lock and makes its text after releasing it (Station::ledgerText):
 // this measures both parts, in the same run, for ledgers holding more and more loops, and prints
-// the lock's share as a ratio (these machines are noisy; the ratio is what carries over).
+// text / copy: how much longer the lock would be held if the text were made under it (these
+// machines are noisy; the ratio is what carries over).
 
 #include <algorithm>
 #include <iostream>
