@@ -20,6 +20,7 @@ mild_render_generated() {
   shift 2
   [[ -f "$cache/$name/gt_loops.txt" ]] && return 0
   echo "[mild_lcd] rendering $name into $cache (once)" >&2
+  mkdir -p "$cache"  # a fresh machine has no cache yet
   rm -rf "$cache/tmp_$name"
   (cd "$BENCH/generator" && /usr/bin/python3 gen.py "$@" --out "$cache/tmp_$name" >"$cache/$name.log" 2>&1) \
     || { echo "[mild_lcd] gen.py failed for $name (see $cache/$name.log)" >&2; return 1; }
