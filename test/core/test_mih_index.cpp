@@ -356,6 +356,52 @@ TEST(MihIndex, PlannedReadsGiveWhatProbingGives) {
   EXPECT_GT(index.evictedEntries(), 0u);
 }
 
+// Ids read besides the budget (the near-past band's exclusion window, IdRange) are read only in the
+// buckets the budget reaches: the window's matched counts and the eligible keyframes' then come from
+// the same buckets. Read in every bucket, the window's counts stood above the eligible keyframes'
+// wherever the budget ran out (BRISK's 32 tables sooner than ORB's 16), and the band ended at the
+// window's edge (docs/accuracy.md, "BRISK").
+TEST(MihIndex, IdsBesidesTheBudgetAreReadOnlyInTheBucketsItReaches) {
+  std::mt19937_64 rng(35);
+  for (bool inline_prefixes : {false, true}) {
+    const Descriptor q = test::randomDescriptor(rng);
+    Descriptor rare = q;  // meets q in table 0 only
+    for (int t = 1; t < 16; ++t) rare.flip(16 * t);
+    Descriptor common = q;  // meets q in tables 1..15
+    common.flip(0);
+    const auto read = [&](uint32_t budget, std::set<FeatureId>& found) {
+      MihParams p = uncapped(16, 0);
+      p.max_bucket_entries = 0;
+      p.max_candidates_per_feature = budget;
+      p.inline_prefixes = inline_prefixes;
+      MihIndex index(p, kOrbBits);
+      for (FeatureId k = 0; k < 50; ++k) index.insertKeyframe(&rare, 1, k);      // q's bucket of table 0: 50 ids
+      for (FeatureId k = 50; k < 110; ++k) index.insertKeyframe(&common, 1, k);  // of tables 1..15: 60 each
+      index.deferMerges(false);
+      const IdRange ids(110, 100);  // 100..109 read besides the budget
+      ProbeCounters counters;
+      if (inline_prefixes) {
+        index.probeWithPrefixes(q, ids, counters, [&](FeatureId id, uint64_t) { found.insert(id); });
+      } else {
+        index.probe(q, ids, counters, [&](FeatureId id, int) { found.insert(id); });
+      }
+      return counters.entries_visited;
+    };
+    // A budget of 50 is spent in table 0's bucket, the shortest: the window is read in none of the
+    // others.
+    std::set<FeatureId> found, expected;
+    for (FeatureId k = 0; k < 50; ++k) expected.insert(k);
+    EXPECT_EQ(read(50, found), 50u) << inline_prefixes;
+    EXPECT_EQ(found, expected) << inline_prefixes;
+    // A budget of 80 reaches table 1's bucket too: the window there, besides the budget, then its 30
+    // newest eligible ids; tables 2..15 are not read, the window's ids in them neither.
+    found.clear();
+    for (FeatureId k = 70; k < 110; ++k) expected.insert(k);
+    EXPECT_EQ(read(80, found), 50u + 10u + 30u) << inline_prefixes;
+    EXPECT_EQ(found, expected) << inline_prefixes;
+  }
+}
+
 // The budget is per 16 tables: BRISK's 32 tables read twice as many entries as ORB's 16.
 TEST(MihIndex, QueryBudgetScalesWithTheTableCount) {
   std::mt19937_64 rng(34);

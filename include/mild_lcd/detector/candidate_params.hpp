@@ -10,7 +10,7 @@ struct CandidateParams {
   int exclusion_frames = 40;
   double exclusion_seconds = 0.0;
   bool near_past = true;
-  double near_past_rise = 3.0;
+  double near_past_rise = 4.0;
   int max_candidates = 3;
   int similarity_candidates = 2;
   int suppression_radius = 5;

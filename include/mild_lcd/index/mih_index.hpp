@@ -64,10 +64,11 @@ struct MihParams {
 };
 
 // The ids a probe reads: those below `end`. With a query budget, ids at or above `unbudgeted_from`
-// are read besides it, without counting against it: a caller that also wants the newest keyframes'
-// matches for another purpose (the near-past band reads the exclusion window) then gets the same
-// ids below `unbudgeted_from` as a probe that stops there. From a plain id: every id below it,
-// all of them budgeted.
+// are read besides it, without counting against it, in the buckets the budget reaches: a caller
+// that also wants the newest keyframes' matches for another purpose (the near-past band reads the
+// exclusion window) then gets the same ids below `unbudgeted_from` as a probe that stops there, and
+// the newest keyframes' matches from the same buckets as theirs. From a plain id: every id below
+// it, all of them budgeted.
 struct IdRange {
   IdRange(FeatureId id_end) : end(id_end), unbudgeted_from(id_end) {}  // NOLINT(google-explicit-constructor)
   IdRange(FeatureId id_end, FeatureId unbudgeted) : end(id_end), unbudgeted_from(std::min(unbudgeted, id_end)) {}
@@ -365,16 +366,17 @@ void MihIndex::readPlanned(const ProbePlan& plan, IdRange ids, ProbeCounters& co
   // The buckets of one query feature, shortest first when they do not all fit (prepare() sorted
   // them): a short bucket is a distinctive substring (high IDF, and what finds an old place); the
   // longest ones are what grows with the map. Within a bucket the newest ids come first, so the
-  // unbudgeted ones (at or above ids.unbudgeted_from) are read before the budget is touched.
+  // unbudgeted ones (at or above ids.unbudgeted_from) are read before the budget is touched; and
+  // only in the buckets the budget reaches, so that what is counted of them and of the budgeted ids
+  // comes from the same buckets (the near-past band compares the two counts).
   const FeatureId id_limit = ids.end, free_from = ids.unbudgeted_from;
-  const bool any_free = free_from < id_limit;
   uint32_t budget = query_budget_;
   const auto read = [&](FeatureId id, uint64_t prefix, int t) {
     ++counters.entries_visited;
     visit(id, prefix, t);
   };
   for (const ProbePlan::Bucket& b : plan.buckets_) {
-    if (budget == 0 && !any_free) break;
+    if (budget == 0) break;
     if (b.length == 0) continue;
     const Shard& shard = *static_cast<const Shard*>(b.shard);
     const Slot& s = shard.slots[b.slot];

@@ -33,7 +33,7 @@ namespace mild {
 // candidate at once. The band never reaches below `floor` (the start of the current session: older
 // sessions are never "a moment ago").
 struct NearPastRule {
-  double rise = 3.0;
+  double rise = 4.0;  // detector/near_past_rise
   KeyframeIndex floor = 0;
 };
 
