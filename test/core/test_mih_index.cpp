@@ -360,7 +360,7 @@ TEST(MihIndex, PlannedReadsGiveWhatProbingGives) {
 // buckets the budget reaches: the window's matched counts and the eligible keyframes' then come from
 // the same buckets. Read in every bucket, the window's counts stood above the eligible keyframes'
 // wherever the budget ran out (BRISK's 32 tables sooner than ORB's 16), and the band ended at the
-// window's edge (docs/accuracy.md, "BRISK").
+// window's edge (docs/accuracy.md, "The near-past band and BRISK").
 TEST(MihIndex, IdsBesidesTheBudgetAreReadOnlyInTheBucketsItReaches) {
   std::mt19937_64 rng(35);
   for (bool inline_prefixes : {false, true}) {

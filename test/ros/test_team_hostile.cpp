@@ -267,7 +267,7 @@ TEST(HostilePeer, IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot) {
     }
     return refused;
   };
-  ros::WallDuration(2.5).sleep();
+  ros::WallDuration(2.5).sleep();  // the replies still on their way, which the wait below compares with
   const ros::WallTime counted_by = ros::WallTime::now() + ros::WallDuration(15.0);
   while (alpha_refused() <= refusals_answered() && ros::WallTime::now() < counted_by) ros::WallDuration(0.2).sleep();
 
@@ -871,7 +871,7 @@ TEST(TeamKey, AStationWithAKeyRefusesEveryMessageWithoutIt) {
   // As the unkeyed flood's bound (IsRefusedCountedAndDoesNotDelayTheStationsOwnRobot).
   EXPECT_LE(flood_p50, 2.0 * calm_p50 + 1.0) << "the forged flood delayed the station's own robot";
 
-  mild_lcd::TeamStatus last = kilo();
+  const mild_lcd::TeamStatus last = kilo();
   EXPECT_GE(last.refused - refused_before, forged / 2) << "the forged messages were not counted";
   EXPECT_EQ(std::count(last.peers.begin(), last.peers.end(), "mallory"), 0) << "mallory was taken for a peer";
   for (const auto& m : published.messages()) {
