@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cstdlib>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -270,7 +271,15 @@ class Network {
     l.query = LoopKey{d.peer, d.query_robot, d.query_session, d.query_id, decider.name};
     PublishedLoop published{l.query, {}};
     for (const LoopCandidate& c : d.result.candidates) {
-      l.candidates.push_back({decider.robots.at(c.robot), c.session, c.id});
+      PeerLoop::Candidate k;  // as the decider's link sends it
+      k.station = decider.name;
+      k.robot = decider.robots.at(c.robot);
+      k.session = c.session;
+      k.id = c.id;
+      k.probability = c.probability;
+      k.verified = c.verification.verified;
+      k.accepted = !c.accepted;  // the peer's word, never taken: the station decides it again
+      l.candidates.push_back(k);
       if (c.accepted) published.accepted.push_back(c.id);
     }
     l.published = published;
@@ -292,16 +301,22 @@ class Network {
     if (out.persist) n.saved = n.station->ledgerText();
     if (dies && crash->kill == Kill::kAfterPersist) {
       for (const DecidedLoop& d : out.published) crash->lost.push_back(peerLoopOf(n, d).query);
-      for (const auto& [robot, any] : out.taken) crash->lost.push_back(std::any_cast<const PublishedLoop&>(any).key);
+      for (const auto& [robot, l] : out.taken)
+        crash->lost.push_back(std::any_cast<const PublishedLoop&>(l.published).key);
       return restart(i);
     }
     for (const DecidedLoop& d : out.published) {
       ++n.published[peerLoopOf(n, d).query];
       n.decided.push_back(d);
     }
-    for (const auto& [robot, any] : out.taken) {
-      const PublishedLoop& p = std::any_cast<const PublishedLoop&>(any);
+    for (const auto& [robot, l] : out.taken) {
+      const PublishedLoop& p = std::any_cast<const PublishedLoop&>(l.published);
       EXPECT_EQ(n.robots.at(robot), p.key.robot) << "a loop taken on another robot than its query's";
+      std::vector<uint64_t> accepted;  // as decided here: the decider's own decisions, by the same rule
+      for (const PeerLoop::Candidate& c : l.candidates) {
+        if (c.accepted) accepted.push_back(c.id);
+      }
+      EXPECT_EQ(accepted, p.accepted) << "accepted decided here differs from the decider's";
       ++n.taken[p.key];
     }
     for (const DecidedLoop& d : out.loops) {
@@ -807,7 +822,13 @@ struct HostileFixture : ::testing::Test {
     l.epoch = 77;
     l.seq = seq;
     l.query = LoopKey{"alpha", "robot1", 0, query, decider};
-    l.candidates = {{"robot2", 0, 200}};
+    PeerLoop::Candidate c;
+    c.station = decider;
+    c.robot = "robot2";
+    c.id = 200;
+    c.probability = 0.95;
+    c.verified = true;
+    l.candidates = {c};
     l.published = PublishedLoop{l.query, {200}};
     l.wire_bytes = 1000;
     return l;
@@ -834,10 +855,11 @@ TEST_F(HostileFixture, APeersLoopIsPublishedOnlyFromAPeerForAKeyframeStoredHereW
   EXPECT_TRUE(out.taken.empty());
   EXPECT_EQ(figure(station(), "refused from no peer"), no_peer + 1);
   for (const auto& [k, v] : station().report().values) EXPECT_EQ(k.rfind("zulu", 0), std::string::npos) << k;
-  // A content problem (the link's check): refused, counted against bravo.
+  // A content problem (peerLoopContentProblem; test_peer_loop_check has each): refused, counted
+  // against bravo.
   uint64_t refused = figure(station(), "bravo: refused");
   PeerLoop bad = loopOf("bravo", 0, 1);
-  bad.content_problem = "a candidate's probability is not in [0, 1]";
+  bad.candidates[0].probability = std::numeric_limits<double>::quiet_NaN();
   station().receive(bad);
   out = work();
   EXPECT_TRUE(out.taken.empty());
@@ -861,7 +883,7 @@ TEST_F(HostileFixture, APeersLoopIsPublishedOnlyFromAPeerForAKeyframeStoredHereW
   no_robot.query.robot = "robot9";
   station().receive(no_robot);
   PeerLoop unannounced = loopOf("bravo", 5, 1);
-  unannounced.candidates = {{"robot2", 0, 250}};
+  unannounced.candidates[0].id = 250;
   station().receive(unannounced);
   out = work();
   EXPECT_TRUE(out.taken.empty());
@@ -872,7 +894,8 @@ TEST_F(HostileFixture, APeersLoopIsPublishedOnlyFromAPeerForAKeyframeStoredHereW
   out = work();
   ASSERT_EQ(out.taken.size(), 1u);
   EXPECT_EQ(out.taken[0].first, 0u);
-  EXPECT_EQ(std::any_cast<const PublishedLoop&>(out.taken[0].second).key.id, 1u);
+  EXPECT_EQ(std::any_cast<const PublishedLoop&>(out.taken[0].second.published).key.id, 1u);
+  EXPECT_TRUE(out.taken[0].second.candidates[0].accepted) << "verified at 0.95: accepted here";
   EXPECT_TRUE(out.persist);
   station().receive(loopOf("bravo", 6, 1));
   out = work();

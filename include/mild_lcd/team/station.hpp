@@ -17,7 +17,7 @@
 //   filled; a loop found for a keyframe numbered during an outage is counted late.
 // - Hostile peers: every message is bounded and checked; a peer's loop is published only when its
 //   query is a keyframe stored here, its candidates keyframes its decider announced and its content
-//   sound (the link's check, PeerLoop::content_problem); a name never heard from makes no peer;
+//   content sound (peer_loop_check.hpp), `accepted` decided here; a name never heard from makes no peer;
 //   more than max_requests_per_second requests from one peer are answered busy; with a team key,
 //   messages whose MAC fails or that replay a counter are refused and counted per claimed sender.
 //
@@ -38,6 +38,7 @@
 #include <vector>
 
 #include "mild_lcd/detector/robot_team.hpp"
+#include "mild_lcd/team/peer_loop_check.hpp"
 #include "mild_lcd/team/place_summary.hpp"
 #include "mild_lcd/team/station_ledger.hpp"
 #include "mild_lcd/team/team_messages.hpp"
@@ -73,7 +74,7 @@ struct StationSettings {
 struct Outbox {
   bool persist = false;
   std::vector<DecidedLoop> published;                           // on the loop's robots' loop_closure here
-  std::vector<std::pair<size_t, std::any>> taken;               // a peer's loop, on this robot's loop_closure
+  std::vector<std::pair<size_t, PeerLoop>> taken;               // a peer's loop, on this robot's loop_closure
   std::vector<DecidedLoop> loops;                               // to each loop's peer
   std::vector<std::pair<std::string, TeamRequest>> requests;    // to the named peer
   std::vector<std::pair<std::string, PlaceSummary>> summaries;  // to the named peer (a gap's filling)
@@ -129,14 +130,6 @@ class Station {
   // is taken (its sender's counters on one topic only grow); else it is counted against `sender`.
   bool admit(const std::string& sender, const std::string& topic, uint64_t counter, bool mac_ok);
   void refusedUnread();  // a message too large or of another type, refused before it was read
-  // The content rules a peer's loop is checked by (detector/max_candidates,
-  // scoring/decision_probability, as of the last work()).
-  struct LoopRules {
-    size_t max_candidates = 0;
-    size_t max_correspondences = 0;
-    double decision_probability = 1.0;
-  };
-  LoopRules loopRules();
 
   // The link's thread: waits up to `timeout` for something to do; false once halted.
   bool wait(std::chrono::milliseconds timeout);
@@ -219,7 +212,7 @@ class Station {
   std::condition_variable wake_;
   bool halted_ = false, draining_ = false;
   bool ids_reserved_ = false;  // a robot's next block of ids: the ledger is to be saved
-  LoopRules rules_;
+  PeerLoopRules rules_;        // detector/max_candidates, scoring/decision_probability: as of the last work()
   std::map<std::string, Peer> peers_;
   std::vector<std::string> new_peers_;
   std::deque<TeamRequest> requests_;

@@ -6,6 +6,7 @@
 // TeamLoop.msg; the summary is PlaceSummary (place_summary.hpp).
 
 #include <any>
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -69,20 +70,32 @@ struct DecidedLoop {
   std::vector<size_t> robots;  // this station's robots whose maps hold an accepted candidate
 };
 
-// A peer's loop for one of this station's keyframes, as received: what the protocol checks of it
-// (its numbering, its query and candidates) and what the link publishes when it is taken.
+// A peer's loop for one of this station's keyframes, as received: its numbering, its query and
+// candidates, the content the station checks before publishing it (team/peer_loop_check.hpp), and
+// what the link publishes when it is taken (the message as it came; `accepted` is decided here).
 struct PeerLoop {
   std::string decider;
   uint64_t epoch = 0, seq = 0;
   LoopKey query;  // its query as the decider names it (station, robot, session, id; decider)
   struct Candidate {
-    std::string robot;
+    std::string station, robot;
     uint32_t session = 0;
     uint64_t id = 0;
+    double probability = 0, filter_probability = 0, similarity = 0;
+    bool verified = false;
+    int64_t inliers = 0, matches = 0, pose_inliers = 0;
+    double inlier_ratio = 0, coverage = 0, homography_share = 0;
+    std::array<double, 7> pose{0, 0, 0, 1, 0, 0, 0};  // rotation x, y, z, w; translation x, y, z
+    double reprojection_error = 0;
+    size_t query_indices = 0, candidate_indices = 0;  // its correspondences
+    size_t query_pixels = 0, candidate_pixels = 0;    // their pixels' values (two each, or none)
+    bool pixels_finite = true;
+    bool accepted = false;  // decided here when taken: verified and probability >= the decision
   };
   std::vector<Candidate> candidates;
-  std::string content_problem;  // what its own content breaks (the link's check), "" when nothing
-  std::any published;           // what the link publishes when it is taken (opaque here)
+  size_t frame_id_bytes = 0;
+  std::array<double, 4> timings{};  // extraction, query, filter, verification (ms)
+  std::any published;               // what the link publishes when it is taken (opaque here)
   uint64_t wire_bytes = 0;
 };
 

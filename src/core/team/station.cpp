@@ -83,6 +83,7 @@ void Station::start(const std::optional<std::string>& ledger_text, bool keyed, u
   }
   keyed_ = keyed;
   std::lock_guard<std::mutex> guard(mutex_);
+  rules_.station = settings_.station;
   rules_.max_candidates = static_cast<size_t>(team.params().candidates.max_candidates);
   rules_.max_correspondences = settings_.max_keyframe_features;
   rules_.decision_probability = team.params().scoring.decision_probability;
@@ -360,11 +361,6 @@ void Station::refusedUnread() {
   ++refused_unread_;
 }
 
-Station::LoopRules Station::loopRules() {
-  std::lock_guard<std::mutex> guard(mutex_);
-  return rules_;
-}
-
 void Station::sent(const std::string& name, uint64_t bytes) {
   std::lock_guard<std::mutex> guard(mutex_);
   const auto it = peers_.find(name);
@@ -587,14 +583,15 @@ void Station::judged(const Pending& pending, const Features* features, Outbox& o
 
 // A peer's loop for one of this station's keyframes is published only as this station stored and
 // heard it: its query a keyframe stored here for that robot (id and session), its candidates
-// keyframes the decider announced, its content sound (PeerLoop::content_problem), `accepted`
-// decided here (the link's). A loop refused is counted; when its decider is a peer whose summaries
+// keyframes the decider announced, its content sound (peerLoopContentProblem), `accepted`
+// decided here. A loop refused is counted; when its decider is a peer whose summaries
 // this station took, its number is taken too, so that the decider's later loops are not held
 // behind it (the decider resends a loop until it is counted).
 void Station::onLoop(PeerLoop loop, Outbox& out) {
   const size_t robot = robotIndex(loop.query.robot);
   uint64_t loops_from = 0;
   bool caught_up = false;  // every summary the decider numbered is taken here
+  PeerLoopRules rules;
   {
     std::lock_guard<std::mutex> guard(mutex_);
     // Only a peer's loops are taken: a name never heard from makes no peer and no ledger entry.
@@ -606,9 +603,10 @@ void Station::onLoop(PeerLoop loop, Outbox& out) {
     // The lowest it can still send, as its heartbeat says: of this loop's run only.
     loops_from = it->second.runs.current == loop.epoch ? it->second.loops_from : 0;
     caught_up = it->second.summaries <= it->second.taken;
+    rules = rules_;
   }
   const auto lock = maps_.lock();
-  std::string problem = loop.content_problem;
+  std::string problem = peerLoopContentProblem(loop, rules);
   if (problem.empty()) problem = unknownKeyframeOf(loop, robot);
   // A candidate not announced yet, while the decider's summaries are still coming (both stored at
   // once, or a gap being filled): it is resent until its summary is taken here.
@@ -654,7 +652,8 @@ void Station::onLoop(PeerLoop loop, Outbox& out) {
     return;
   }
   out.persist = true;
-  out.taken.emplace_back(robot, std::move(loop.published));
+  for (PeerLoop::Candidate& c : loop.candidates) c.accepted = acceptedHere(c, rules);
+  out.taken.emplace_back(robot, std::move(loop));
 }
 
 // Under the detector lock: "" when the loop's query is a keyframe this station stored for that robot

@@ -1,6 +1,9 @@
 #include "mild_lcd/ros/messages/team_conversions.hpp"
 
+#include <cmath>
+
 #include <ros/serialization.h>
+#include <boost/make_shared.hpp>
 
 #include "mild_lcd/ros/messages/message_conversions.hpp"
 
@@ -161,6 +164,55 @@ mild_lcd::TeamLoop teamLoopToMsg(const mild::DecidedLoop& loop, const std::strin
   msg.epoch = loop.epoch;
   msg.seq = loop.seq;
   msg.loop = decidedLoopToMsg(loop, station, correspondences, robot_names);
+  return msg;
+}
+
+mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& msg) {
+  mild::PeerLoop p;
+  p.decider = msg.decider;
+  p.epoch = msg.epoch;
+  p.seq = msg.seq;
+  const mild_lcd::LoopClosure& l = msg.loop;
+  p.query = {l.query_station, l.query_robot, l.query_session, l.query_id, msg.decider};
+  for (const mild_lcd::LoopCandidate& c : l.candidates) {
+    const auto& q = c.relative_rotation;
+    const auto& t = c.relative_translation;
+    mild::PeerLoop::Candidate k{c.station,
+                                c.robot,
+                                c.session,
+                                c.id,
+                                c.probability,
+                                c.filter_probability,
+                                c.similarity,
+                                c.verified != 0,
+                                c.inliers,
+                                c.matches,
+                                c.pose_inliers,
+                                c.inlier_ratio,
+                                c.coverage,
+                                c.homography_share,
+                                {q.x, q.y, q.z, q.w, t.x, t.y, t.z},
+                                c.reprojection_error,
+                                c.inlier_query_indices.size(),
+                                c.inlier_candidate_indices.size(),
+                                c.inlier_query_pixels.size(),
+                                c.inlier_candidate_pixels.size()};
+    for (const float v : c.inlier_query_pixels) k.pixels_finite = k.pixels_finite && std::isfinite(v);
+    for (const float v : c.inlier_candidate_pixels) k.pixels_finite = k.pixels_finite && std::isfinite(v);
+    p.candidates.push_back(std::move(k));
+  }
+  p.frame_id_bytes = l.header.frame_id.size();
+  p.timings = {l.extract_ms, l.query_ms, l.filter_ms, l.verify_ms};
+  p.published = mild_lcd::LoopClosure::ConstPtr(boost::make_shared<mild_lcd::LoopClosure>(l));
+  p.wire_bytes = ros::serialization::serializationLength(msg);
+  return p;
+}
+
+mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(const mild::PeerLoop& loop) {
+  auto msg = boost::make_shared<mild_lcd::LoopClosure>(*std::any_cast<mild_lcd::LoopClosure::ConstPtr>(loop.published));
+  for (size_t i = 0; i < msg->candidates.size() && i < loop.candidates.size(); ++i) {
+    msg->candidates[i].accepted = loop.candidates[i].accepted;
+  }
   return msg;
 }
 

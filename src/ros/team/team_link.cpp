@@ -8,7 +8,6 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/io/database_directory.hpp"
-#include "mild_lcd/ros/messages/peer_loop.hpp"
 #include "mild_lcd/ros/messages/team_conversions.hpp"
 
 namespace mild_lcd {
@@ -133,13 +132,9 @@ void TeamLink::start() {
   subscribers_.push_back(subscribe<mild_lcd::TeamFeatures>(
       topic(me, "features"), 100, mild::Station::kMaxMessageBytes,
       [this](const mild_lcd::TeamFeatures& m) { station_.receive(featuresReplyFromMsg(m)); }));
-  subscribers_.push_back(subscribe<mild_lcd::TeamLoop>(
-      topic(me, "loops"), 1000, mild::Station::kMaxMessageBytes, [this](const mild_lcd::TeamLoop& m) {
-        const mild::Station::LoopRules r = station_.loopRules();
-        const PeerLoopRules rules{settings_.team_station, r.max_candidates, r.max_correspondences,
-                                  r.decision_probability};
-        station_.receive(peerLoopFromMsg(m, rules));
-      }));
+  subscribers_.push_back(
+      subscribe<mild_lcd::TeamLoop>(topic(me, "loops"), 1000, mild::Station::kMaxMessageBytes,
+                                    [this](const mild_lcd::TeamLoop& m) { station_.receive(peerLoopFromMsg(m)); }));
   spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
   spinner_->start();
   thread_ = std::thread([this] { run(); });
@@ -249,9 +244,7 @@ void TeamLink::send(mild::Outbox out) {
     publish_(loop.robots, boost::make_shared<mild_lcd::LoopClosure>(
                               decidedLoopToMsg(loop, settings_.team_station, correspondences, robot_names_)));
   }
-  for (auto& [robot, loop] : out.taken) {
-    publish_({robot}, std::any_cast<mild_lcd::LoopClosure::ConstPtr>(loop));
-  }
+  for (const auto& [robot, loop] : out.taken) publish_({robot}, peerLoopToPublish(loop));
   for (const mild::DecidedLoop& loop : out.loops) {
     sendTo(loop.peer, "loops", teamLoopToMsg(loop, settings_.team_station, correspondences, robot_names_));
   }

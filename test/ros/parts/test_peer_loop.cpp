@@ -1,13 +1,14 @@
-// test_ros_parts: a team peer's loop as a station checks it before publishing it
-// (ros/messages/peer_loop.hpp): each content a hostile or broken peer could send is refused with its
-// reason, and `accepted` is decided here, never taken from the peer. Whether the query and the
+// test_ros_parts: a team peer's loop from its message (ros/messages/team_conversions.hpp) to the
+// station's check (team/peer_loop_check.hpp, test_peer_loop_check): each content a hostile or broken
+// peer could send in a TeamLoop reaches the check and is refused with its reason, and what is
+// published carries `accepted` as decided here, never as the peer sent it. Whether the query and the
 // candidates are keyframes the station stored and the peer announced is mild::Station's
-// (test_station_protocol); this is the part of "nothing from a peer is published as it came" that
-// the message itself tells.
+// (test_station_protocol).
 
 #include <limits>
 
-#include "mild_lcd/ros/messages/peer_loop.hpp"
+#include "mild_lcd/ros/messages/team_conversions.hpp"
+#include "mild_lcd/team/peer_loop_check.hpp"
 #include "ros_parts_support.hpp"
 
 namespace mild_lcd {
@@ -16,7 +17,7 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-const PeerLoopRules kRules{"alpha", 10, 1000, 0.909};
+const mild::PeerLoopRules kRules{"alpha", 10, 1000, 0.909};
 
 // bravo's loop for alpha's keyframe (robot1, session 1, id 42): one verified candidate of bravo's
 // robot2 at 0.95, sent with `accepted` false (this station decides it).
@@ -58,12 +59,19 @@ mild_lcd::TeamLoop soundLoop() {
 std::string problemAfter(const std::function<void(mild_lcd::TeamLoop&)>& change) {
   mild_lcd::TeamLoop loop = soundLoop();
   change(loop);
-  return peerLoopContentProblem(loop, kRules);
+  return mild::peerLoopContentProblem(peerLoopFromMsg(loop), kRules);
+}
+
+// The loop as published once the station took it: `accepted` as decided here.
+mild_lcd::LoopClosure::ConstPtr publishedAfterTaking(const mild_lcd::TeamLoop& loop) {
+  mild::PeerLoop taken = peerLoopFromMsg(loop);
+  for (mild::PeerLoop::Candidate& c : taken.candidates) c.accepted = mild::acceptedHere(c, kRules);
+  return peerLoopToPublish(taken);
 }
 
 TEST(PeerLoop, ASoundLoopIsTakenWithItsNumberingQueryAndCandidates) {
-  const mild::PeerLoop taken = peerLoopFromMsg(soundLoop(), kRules);
-  EXPECT_EQ(taken.content_problem, "");
+  const mild::PeerLoop taken = peerLoopFromMsg(soundLoop());
+  EXPECT_EQ(mild::peerLoopContentProblem(taken, kRules), "");
   EXPECT_EQ(taken.decider, "bravo");
   EXPECT_EQ(taken.epoch, 3u);
   EXPECT_EQ(taken.seq, 7u);
@@ -75,8 +83,10 @@ TEST(PeerLoop, ASoundLoopIsTakenWithItsNumberingQueryAndCandidates) {
   EXPECT_EQ(taken.candidates[0].robot, "robot2");
   EXPECT_EQ(taken.candidates[0].id, 5u);
   EXPECT_GT(taken.wire_bytes, 0u);
-  const auto published = std::any_cast<mild_lcd::LoopClosure::ConstPtr>(taken.published);
+  const auto published = publishedAfterTaking(soundLoop());
   ASSERT_EQ(published->candidates.size(), 1u);
+  EXPECT_EQ(published->query_id, 42u);
+  EXPECT_EQ(published->candidates[0].inlier_candidate_pixels, soundLoop().loop.candidates[0].inlier_candidate_pixels);
   EXPECT_TRUE(published->candidates[0].accepted) << "verified at 0.95 >= 0.909: accepted here";
 }
 
@@ -91,13 +101,14 @@ TEST(PeerLoop, AcceptedIsDecidedHereNeverTakenFromThePeer) {
   low.accepted = true;
   low.id = 7;
   loop.loop.candidates = {loop.loop.candidates[0], unverified, low};
-  const mild_lcd::LoopClosure::Ptr published = peerLoopAsPublished(loop, kRules);
+  const mild_lcd::LoopClosure::ConstPtr published = publishedAfterTaking(loop);
   EXPECT_TRUE(published->candidates[0].accepted);
   EXPECT_FALSE(published->candidates[1].accepted) << "an unverified candidate marked accepted";
   EXPECT_FALSE(published->candidates[2].accepted) << "a probability below scoring/decision_probability";
   // With no candidate accepted here, the loop is not published at all.
   loop.loop.candidates = {unverified, low};
-  EXPECT_NE(peerLoopContentProblem(loop, kRules).find("no candidate is verified"), std::string::npos);
+  EXPECT_NE(mild::peerLoopContentProblem(peerLoopFromMsg(loop), kRules).find("no candidate is verified"),
+            std::string::npos);
 }
 
 TEST(PeerLoop, EachContentAPeerCouldBreakIsRefusedWithItsReason) {
@@ -138,17 +149,6 @@ TEST(PeerLoop, EachContentAPeerCouldBreakIsRefusedWithItsReason) {
     EXPECT_NE(problem.find(reason), std::string::npos) << "expected '" << reason << "', got '" << problem << "'";
   }
   EXPECT_EQ(problemAfter([](L&) {}), "");
-}
-
-// A refused loop is still taken as a number (so that the peer's later loops are not held behind it)
-// but carries nothing to publish.
-TEST(PeerLoop, ARefusedLoopCarriesItsReasonAndNothingToPublish) {
-  mild_lcd::TeamLoop loop = soundLoop();
-  loop.loop.candidates[0].probability = kNaN;
-  const mild::PeerLoop taken = peerLoopFromMsg(loop, kRules);
-  EXPECT_NE(taken.content_problem, "");
-  EXPECT_FALSE(taken.published.has_value());
-  EXPECT_EQ(taken.seq, 7u);
 }
 
 }  // namespace

@@ -38,6 +38,10 @@ mild_lcd::LoopClosure decidedLoopToMsg(const mild::DecidedLoop& loop, const std:
                                        const std::vector<std::string>& robot_names);
 mild_lcd::TeamLoop teamLoopToMsg(const mild::DecidedLoop& loop, const std::string& station, bool correspondences,
                                  const std::vector<std::string>& robot_names);
+// A peer's loop as the station protocol checks it (mild::peerLoopContentProblem), carrying the
+// message as it came; and that message as published once taken, with `accepted` as decided here.
+mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& msg);
+mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(const mild::PeerLoop& loop);
 
 // The station protocol's settings (~team/...) for this node's robots as named on the wire.
 mild::StationSettings stationSettings(const NodeSettings& settings, std::vector<std::string> robots);
