@@ -28,6 +28,7 @@
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/feature_front_end.hpp"
 #include "mild_lcd/detector/robot_team.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/offline/evaluation.hpp"
 #include "mild_lcd/team/place_summary.hpp"
 #include "mild_lcd/team/station_identity.hpp"
@@ -203,6 +204,40 @@ TEST(StationLedger, IsSavedAndReadBackAndRefusesAnotherStationsChangingNothing) 
   EXPECT_THROW(StationLedger("", 1), InvalidInput);
   EXPECT_THROW(StationLedger("alpha/x", 1), InvalidInput);
   EXPECT_THROW(StationLedger("alpha", 0), InvalidInput);
+}
+
+// The ledger's file is read and written as the maps are: whole (a crash leaves the previous one),
+// none before the first save or without its folder, and a link or a FIFO planted at its name is
+// refused at once, neither followed nor waited on (test_team_hostile plants them at a running node).
+TEST(StationLedger, ItsFileIsWrittenWholeAndNeverThroughALinkOrAFifo) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("mild_ledger_file_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string path = (dir / ("alpha" + std::string(kTeamLedgerSuffix))).string();
+  EXPECT_FALSE(readLedgerFile(path).has_value()) << "none saved yet";
+  EXPECT_FALSE(readLedgerFile((dir / "absent" / "alpha.team_ledger.json").string()).has_value());
+  StationLedger ledger("alpha", 1);
+  ledger.took("bravo");
+  writeLedgerFile(path, ledger.toText());
+  ledger.took("bravo");
+  writeLedgerFile(path, ledger.toText());
+  EXPECT_EQ(readLedgerFile(path), ledger.toText());
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), std::filesystem::directory_iterator()), 1)
+      << "no temporary file left beside it";
+  const std::string outside = (dir / "outside.txt").string();
+  std::ofstream(outside) << "kept";
+  std::filesystem::remove(path);
+  std::filesystem::create_symlink(outside, path);
+  EXPECT_THROW(readLedgerFile(path), InvalidInput);
+  EXPECT_THROW(writeLedgerFile(path, ledger.toText()), InvalidInput);
+  std::ifstream kept(outside);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "kept") << "written through the link";
+  std::filesystem::remove(path);
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+  EXPECT_THROW(readLedgerFile(path), InvalidInput) << "a FIFO is refused, not waited on";
+  EXPECT_THROW(writeLedgerFile(path, ledger.toText()), InvalidInput);
+  std::filesystem::remove_all(dir);
 }
 
 // A remote robot's filters into this team's maps are the team's to keep consistent: a map

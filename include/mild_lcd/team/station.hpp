@@ -103,6 +103,7 @@ class Station {
 
   // Throws InvalidInput for an invalid station name.
   Station(StationSettings settings, StationMaps& maps);
+  const StationSettings& settings() const { return settings_; }
 
   // Before anything else: the ledger saved by an earlier run (none: a first run), the key's
   // presence (messages are then admitted only with a valid MAC), and this run's epoch. Each robot's
@@ -142,9 +143,11 @@ class Station {
   std::vector<std::string> newPeers();
 
   // Stopping: no more peer keyframes taken; settled() once no pull waits and no loop waits for a
-  // connected peer's acknowledgement. halt() ends wait().
+  // connected peer's acknowledgement; settle() waits up to `timeout` for it (a pull takes
+  // milliseconds on a live link), with the link's thread still working. halt() ends wait().
   void drain();
   bool settled();
+  bool settle(std::chrono::milliseconds timeout);
   size_t pendingPulls();
   void halt();
 

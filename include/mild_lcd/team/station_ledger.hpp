@@ -142,8 +142,6 @@ class StationLedger {
   std::vector<std::string> loopedBy(const std::string& station, const std::string& robot, uint32_t session,
                                     uint64_t id) const;
 
-  // The ledger as text (JSON), and back. fromText throws InvalidInput for text that is not a
-  // ledger of this station with this many robots, changing nothing.
   // Per robot: the keyframe id below which this station's runs may have given ids out. A run
   // reserves ids in blocks, saved before it gives them (Station), so that a restart after a crash
   // (its map saved earlier, or not at all) gives out none of them again: 0 when none was reserved.
@@ -155,6 +153,8 @@ class StationLedger {
   const std::map<std::string, uint64_t>& counters() const { return counters_; }
   void setCounters(std::map<std::string, uint64_t> counters) { counters_ = std::move(counters); }
 
+  // The ledger as text (JSON), and back. fromText throws InvalidInput for text that is not a
+  // ledger of this station with this many robots, changing nothing.
   std::string toText() const;
   void fromText(const std::string& text);
 
@@ -182,5 +182,13 @@ class StationLedger {
   std::set<LoopKey> loops_kept_;
   std::deque<LoopKey> loops_order_;  // loops_kept_ as kept, oldest first
 };
+
+// The ledger's file beside the maps (<folder>/<station>.team_ledger.json), read and written as the
+// maps are: a link, a FIFO or a device at its name is refused (never followed, never waited on).
+// readLedgerFile: its text, or none when neither the folder nor the file exists. writeLedgerFile:
+// through a temporary file of its own, flushed to disk and renamed over it, so that a crash leaves
+// the previous ledger whole. Both throw IoError, and InvalidInput for what is not a regular file.
+std::optional<std::string> readLedgerFile(const std::string& path);
+void writeLedgerFile(const std::string& path, const std::string& text);
 
 }  // namespace mild

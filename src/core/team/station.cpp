@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <iterator>
+#include <thread>
 
 #include "mild_lcd/common/errors.hpp"
 
@@ -812,6 +813,15 @@ bool Station::settled() {
   if (!pending_.empty()) return false;
   return std::none_of(peers_.begin(), peers_.end(),
                       [this](const auto& p) { return connected(p.second) && !p.second.unacknowledged.empty(); });
+}
+
+bool Station::settle(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (!settled()) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
 }
 
 size_t Station::pendingPulls() {

@@ -1,12 +1,14 @@
 #include "mild_lcd/team/station_ledger.hpp"
 
 #include <algorithm>
+#include <filesystem>
 #include <random>
 #include <tuple>
 
 #include <nlohmann/json.hpp>
 
 #include "mild_lcd/common/errors.hpp"
+#include "mild_lcd/io/database_directory.hpp"
 
 namespace mild {
 
@@ -340,6 +342,19 @@ void StationLedger::fromText(const std::string& text) {
   } catch (const nlohmann::json::exception& e) {
     throw InvalidInput(std::string("the station ledger is malformed: ") + e.what());
   }
+}
+
+std::optional<std::string> readLedgerFile(const std::string& path) {
+  if (!std::filesystem::is_directory(std::filesystem::path(path).parent_path())) return std::nullopt;
+  const ConfinedFile file = fileAtPath(path);
+  if (!file.exists()) return std::nullopt;
+  return file.readText();
+}
+
+void writeLedgerFile(const std::string& path, const std::string& text) {
+  // How every ledger text begins (toText: a JSON object): ConfinedFile::replace marks its temporary
+  // files with it.
+  fileAtPath(path).replaceText(text, "{\"");
 }
 
 }  // namespace mild

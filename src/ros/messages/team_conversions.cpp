@@ -9,19 +9,6 @@
 
 namespace mild_lcd {
 
-mild::StationSettings stationSettings(const NodeSettings& s, std::vector<std::string> robots) {
-  mild::StationSettings out;
-  out.station = s.team_station;
-  out.robots = std::move(robots);
-  out.summary_bytes = static_cast<size_t>(s.team_summary_bytes);
-  out.backfill_batch = static_cast<size_t>(s.team_backfill_batch);
-  out.max_pending_pulls = static_cast<size_t>(s.team_max_pending_pulls);
-  out.max_requests_per_second = s.team_max_requests_per_second;
-  out.peer_timeout = s.team_peer_timeout;
-  out.max_keyframe_features = static_cast<size_t>(s.max_keyframe_features);
-  return out;
-}
-
 mild::PlaceSummary summaryFromMsg(const mild_lcd::PlaceSummary& msg) {
   mild::PlaceSummary s;
   s.station = msg.station;

@@ -8,6 +8,7 @@
 
 #include "mild_lcd/common/errors.hpp"
 #include "mild_lcd/detector/detector_parameters.hpp"
+#include "mild_lcd/team/station.hpp"
 #include "mild_lcd/team/station_ledger.hpp"
 
 namespace mild_lcd {
@@ -175,6 +176,22 @@ std::vector<std::string> NodeSettings::robotNames() const {
     }
   }
   return names;
+}
+
+mild::StationSettings NodeSettings::stationSettings(std::vector<std::string> robots) const {
+  mild::StationSettings out;
+  out.station = team_station;
+  for (std::string& name : robots) {
+    if (name.empty()) name = team_station;
+  }
+  out.robots = std::move(robots);
+  out.summary_bytes = static_cast<size_t>(team_summary_bytes);
+  out.backfill_batch = static_cast<size_t>(team_backfill_batch);
+  out.max_pending_pulls = static_cast<size_t>(team_max_pending_pulls);
+  out.max_requests_per_second = team_max_requests_per_second;
+  out.peer_timeout = team_peer_timeout;
+  out.max_keyframe_features = static_cast<size_t>(max_keyframe_features);
+  return out;
 }
 
 std::string extractionCostWarning(const NodeSettings& settings, const std::string& feature_type) {

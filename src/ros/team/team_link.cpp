@@ -1,31 +1,15 @@
 #include "mild_lcd/ros/team/team_link.hpp"
 
-#include <filesystem>
-#include <string_view>
-
 #include <topic_tools/shape_shifter.h>
 #include <boost/make_shared.hpp>
 
 #include "mild_lcd/common/errors.hpp"
-#include "mild_lcd/io/database_directory.hpp"
 #include "mild_lcd/ros/messages/team_conversions.hpp"
 
 namespace mild_lcd {
 namespace {
 
-// How every ledger text (StationLedger::toText: a JSON object) begins: ConfinedFile::replace marks
-// its temporary files with it.
-constexpr std::string_view kLedgerSignature = "{\"";
-
 std::string topic(const std::string& station, const std::string& name) { return "/mild_team/" + station + "/" + name; }
-
-// The robots' names on the wire: a station serving one robot (named "") calls it by its own name.
-std::vector<std::string> wireNames(std::vector<std::string> names, const std::string& station) {
-  for (std::string& n : names) {
-    if (n.empty()) n = station;
-  }
-  return names;
-}
 
 }  // namespace
 
@@ -34,11 +18,10 @@ TeamLink::TeamLink(ros::NodeHandle nh, const NodeSettings& settings, SharedDetec
     : nh_(std::move(nh)),
       settings_(settings),
       shared_(shared),
-      robot_names_(wireNames(std::move(robot_names), settings.team_station)),
       ledger_path_(std::move(ledger_path)),
       key_files_(std::move(keys)),
       publish_(std::move(publish)),
-      station_(stationSettings(settings, robot_names_), *this),
+      station_(settings.stationSettings(std::move(robot_names)), *this),
       // Above every counter of this station's earlier runs (a run sends far fewer than a message a
       // nanosecond), so that a restart's messages are not taken for replays.
       next_counter_(static_cast<uint64_t>(
@@ -100,14 +83,10 @@ void TeamLink::start() {
         "team link: no team key (~team/key_file): anyone who can publish on /mild_team/ can inject "
         "loops and take this station's numbers (docs/multi_robot.md, \"The team key\")");
   }
+  // A link, a FIFO or a device at the ledger's name is refused (never followed, never waited on),
+  // and the link stays off rather than write over it.
   std::optional<std::string> ledger;
-  if (!ledger_path_.empty() && settings_.load_on_start &&
-      std::filesystem::is_directory(std::filesystem::path(ledger_path_).parent_path())) {
-    // Read as the maps are: a link, a FIFO or a device at its name is refused (never followed, never
-    // waited on), and the link stays off rather than write over it.
-    const mild::ConfinedFile file = mild::fileAtPath(ledger_path_);
-    if (file.exists()) ledger = file.readText();
-  }
+  if (!ledger_path_.empty() && settings_.load_on_start) ledger = mild::readLedgerFile(ledger_path_);
   station_.start(ledger, credentials_.any());
   const std::string& me = settings_.team_station;
   summaries_pub_ = nh_.advertise<mild_lcd::PlaceSummary>("/mild_team/summaries", 1000);
@@ -147,15 +126,10 @@ void TeamLink::stop() {
   // with a restart. Their answers are waited for a moment (a pull takes milliseconds on a live
   // link), and so are the acknowledgements of loops sent to connected peers.
   station_.drain();
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(3);
-  while (thread_.joinable() && !station_.settled()) {
-    if (std::chrono::steady_clock::now() >= deadline) {
-      ROS_WARN_STREAM("team link: stopping with " << station_.pendingPulls()
-                                                  << " peer keyframes still waiting for their features: their loops, "
-                                                     "if any, are not found");
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  if (thread_.joinable() && !station_.settle(std::chrono::seconds(3))) {
+    ROS_WARN_STREAM("team link: stopping with " << station_.pendingPulls()
+                                                << " peer keyframes still waiting for their features: their loops, "
+                                                   "if any, are not found");
   }
   for (ros::Subscriber& s : subscribers_) s.shutdown();
   if (spinner_) spinner_->stop();
@@ -164,12 +138,7 @@ void TeamLink::stop() {
 }
 
 void TeamLink::save() {
-  if (ledger_path_.empty() || !started_) return;
-  const std::string text = station_.ledgerText();
-  // The maps' writer: a temporary file of its own (never through a link planted in the folder),
-  // flushed to disk, renamed over the ledger, which must be a regular file (a link or a FIFO at its
-  // name is refused, never followed or waited on): a crash leaves the previous ledger whole.
-  mild::fileAtPath(ledger_path_).replaceText(text, kLedgerSignature);
+  if (!ledger_path_.empty() && started_) mild::writeLedgerFile(ledger_path_, station_.ledgerText());
 }
 
 void TeamLink::persist() {
@@ -241,12 +210,13 @@ void TeamLink::send(mild::Outbox out) {
   if (out.persist) persist();
   const bool correspondences = settings_.publish_correspondences;
   for (const mild::DecidedLoop& loop : out.published) {
-    publish_(loop.robots, boost::make_shared<mild_lcd::LoopClosure>(
-                              decidedLoopToMsg(loop, settings_.team_station, correspondences, robot_names_)));
+    publish_(loop.robots, boost::make_shared<mild_lcd::LoopClosure>(decidedLoopToMsg(
+                              loop, settings_.team_station, correspondences, station_.settings().robots)));
   }
   for (const auto& [robot, loop] : out.taken) publish_({robot}, peerLoopToPublish(loop));
   for (const mild::DecidedLoop& loop : out.loops) {
-    sendTo(loop.peer, "loops", teamLoopToMsg(loop, settings_.team_station, correspondences, robot_names_));
+    sendTo(loop.peer, "loops",
+           teamLoopToMsg(loop, settings_.team_station, correspondences, station_.settings().robots));
   }
   for (const auto& [peer, r] : out.requests) sendTo(peer, "requests", requestToMsg(r));
   for (const auto& [peer, s] : out.summaries) sendTo(peer, "summaries", summaryToMsg(s));

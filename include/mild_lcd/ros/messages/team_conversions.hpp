@@ -16,7 +16,6 @@
 #include "mild_lcd/TeamLoop.h"
 #include "mild_lcd/TeamRequest.h"
 #include "mild_lcd/TeamStatus.h"
-#include "mild_lcd/ros/settings/node_settings.hpp"
 #include "mild_lcd/team/place_summary.hpp"
 #include "mild_lcd/team/station.hpp"
 #include "mild_lcd/team/team_messages.hpp"
@@ -42,9 +41,6 @@ mild_lcd::TeamLoop teamLoopToMsg(const mild::DecidedLoop& loop, const std::strin
 // message as it came; and that message as published once taken, with `accepted` as decided here.
 mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& msg);
 mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(const mild::PeerLoop& loop);
-
-// The station protocol's settings (~team/...) for this node's robots as named on the wire.
-mild::StationSettings stationSettings(const NodeSettings& settings, std::vector<std::string> robots);
 
 // Who a message says sent it: what its MAC binds, and what its failures are counted against.
 inline const std::string& senderOf(const mild_lcd::PlaceSummary& m) { return m.station; }

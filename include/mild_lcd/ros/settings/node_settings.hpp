@@ -11,6 +11,10 @@
 #include "mild_lcd/params/parameter_spec.hpp"
 #include "mild_lcd/team/place_summary.hpp"
 
+namespace mild {
+struct StationSettings;
+}  // namespace mild
+
 namespace mild_lcd {
 
 struct NodeSettings {
@@ -46,6 +50,9 @@ struct NodeSettings {
 
   // The robots' names ("" = one robot, topics without a prefix), checked by load().
   std::vector<std::string> robotNames() const;
+  // The station protocol's settings (~team/...) for the robots of this node's maps (RobotTeam's
+  // names: one robot is named "", and on the wire by the station's name).
+  mild::StationSettings stationSettings(std::vector<std::string> robots) const;
 
   // Reads every setting the source holds, type-checked, and validates them. `default_dir` is where
   // maps go when ~database_dir is not set and ~database_path is relative or empty (the node passes

@@ -88,7 +88,6 @@ class TeamLink : private mild::StationMaps {
   ros::NodeHandle nh_;
   const NodeSettings settings_;
   SharedDetector& shared_;
-  const std::vector<std::string> robot_names_;
   const std::string ledger_path_;
   const KeyFiles key_files_;
   PublishLoop publish_;
