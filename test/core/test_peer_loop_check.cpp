@@ -1,6 +1,6 @@
 // test_peer_loop_check: what a station checks of a peer's loop before publishing it
-// (team/peer_loop_check.hpp), on the protocol's plain structs. Each field a message can carry is
-// refused through the ROS conversion in test_ros_parts (test_peer_loop); here: the rules themselves.
+// (team/peer_loop_check.hpp), on the protocol's plain structs: the rules themselves. That each
+// TeamLoop field reaches them through the ROS conversion is test_ros_parts' PeerLoop.*.
 
 #include <gtest/gtest.h>
 

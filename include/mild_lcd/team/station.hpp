@@ -16,10 +16,11 @@
 // - Links drop: a gap (a summary lost, a heartbeat announcing more) is asked for in batches until
 //   filled; a loop found for a keyframe numbered during an outage is counted late.
 // - Hostile peers: every message is bounded and checked; a peer's loop is published only when its
-//   query is a keyframe stored here, its candidates keyframes its decider announced and its content
-//   content sound (peer_loop_check.hpp), `accepted` decided here; a name never heard from makes no peer;
-//   more than max_requests_per_second requests from one peer are answered busy; with a team key,
-//   messages whose MAC fails or that replay a counter are refused and counted per claimed sender.
+//   query is a keyframe stored here, its candidates keyframes its decider announced and its
+//   content sound (peer_loop_check.hpp, on arrival), `accepted` decided here; a name never heard
+//   from makes no peer; more than max_requests_per_second requests from one peer are answered
+//   busy; with a team key, messages whose MAC fails or that replay a counter are refused and
+//   counted per claimed sender.
 //
 // Threads: arrivals (receive*, admit) only queue, under the station's own lock; work() runs on the
 // link's thread; stored() and mapReplaced() on the keyframe path, under the detector lock. Lock
@@ -215,7 +216,7 @@ class Station {
   std::condition_variable wake_;
   bool halted_ = false, draining_ = false;
   bool ids_reserved_ = false;  // a robot's next block of ids: the ledger is to be saved
-  PeerLoopRules rules_;        // detector/max_candidates, scoring/decision_probability: as of the last work()
+  PeerLoopRules rules_;        // detector/max_candidates, scoring/decision_probability: as of start() or the last tick
   std::map<std::string, Peer> peers_;
   std::vector<std::string> new_peers_;
   std::deque<TeamRequest> requests_;

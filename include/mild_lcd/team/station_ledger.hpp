@@ -185,9 +185,10 @@ class StationLedger {
 
 // The ledger's file beside the maps (<folder>/<station>.team_ledger.json), read and written as the
 // maps are: a link, a FIFO or a device at its name is refused (never followed, never waited on).
-// readLedgerFile: its text, or none when neither the folder nor the file exists. writeLedgerFile:
+// readLedgerFile: its text, or none when the folder or the file is missing. writeLedgerFile:
 // through a temporary file of its own, flushed to disk and renamed over it, so that a crash leaves
-// the previous ledger whole. Both throw IoError, and InvalidInput for what is not a regular file.
+// the previous ledger whole. Both throw InvalidInput for what is not a regular file, and IoError
+// (or std::filesystem's errors) when the folder or the file cannot be read or written.
 std::optional<std::string> readLedgerFile(const std::string& path);
 void writeLedgerFile(const std::string& path, const std::string& text);
 

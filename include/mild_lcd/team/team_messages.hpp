@@ -96,6 +96,9 @@ struct PeerLoop {
   size_t frame_id_bytes = 0;
   std::array<double, 4> timings{};  // extraction, query, filter, verification (ms)
   std::any published;               // what the link publishes when it is taken (opaque here)
+  // Set by Station::receive on arrival: what its content breaks ("" when nothing). A loop refused
+  // so waits without its candidates and message: only its numbering is still read.
+  std::string content_problem;
   uint64_t wire_bytes = 0;
 };
 

@@ -326,8 +326,15 @@ void Station::receive(TeamFeatures reply) {
   wake_.notify_one();
 }
 
+// Checked on arrival, off the detector lock: a loop refused by its content waits in the inbox as its
+// numbering only, not as the whole message it came as.
 void Station::receive(PeerLoop loop) {
   std::lock_guard<std::mutex> guard(mutex_);
+  loop.content_problem = peerLoopContentProblem(loop, rules_);
+  if (!loop.content_problem.empty()) {
+    loop.candidates.clear();
+    loop.published.reset();
+  }
   const uint64_t bytes = loop.wire_bytes;
   if (!enqueue(loops_, std::move(loop), bytes, inbox_bytes_)) ++refused_;
   wake_.notify_one();
@@ -584,8 +591,8 @@ void Station::judged(const Pending& pending, const Features* features, Outbox& o
 
 // A peer's loop for one of this station's keyframes is published only as this station stored and
 // heard it: its query a keyframe stored here for that robot (id and session), its candidates
-// keyframes the decider announced, its content sound (peerLoopContentProblem), `accepted`
-// decided here. A loop refused is counted; when its decider is a peer whose summaries
+// keyframes the decider announced, its content sound (peerLoopContentProblem, on arrival),
+// `accepted` decided here. A loop refused is counted; when its decider is a peer whose summaries
 // this station took, its number is taken too, so that the decider's later loops are not held
 // behind it (the decider resends a loop until it is counted).
 void Station::onLoop(PeerLoop loop, Outbox& out) {
@@ -607,7 +614,7 @@ void Station::onLoop(PeerLoop loop, Outbox& out) {
     rules = rules_;
   }
   const auto lock = maps_.lock();
-  std::string problem = peerLoopContentProblem(loop, rules);
+  std::string problem = loop.content_problem;
   if (problem.empty()) problem = unknownKeyframeOf(loop, robot);
   // A candidate not announced yet, while the decider's summaries are still coming (both stored at
   // once, or a gap being filled): it is resent until its summary is taken here.

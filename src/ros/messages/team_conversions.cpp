@@ -162,41 +162,41 @@ mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& msg) {
   const mild_lcd::LoopClosure& l = msg.loop;
   p.query = {l.query_station, l.query_robot, l.query_session, l.query_id, msg.decider};
   for (const mild_lcd::LoopCandidate& c : l.candidates) {
+    mild::PeerLoop::Candidate& k = p.candidates.emplace_back();
+    k.station = c.station;
+    k.robot = c.robot;
+    k.session = c.session;
+    k.id = c.id;
+    k.probability = c.probability;
+    k.filter_probability = c.filter_probability;
+    k.similarity = c.similarity;
+    k.verified = c.verified != 0;
+    k.inliers = c.inliers;
+    k.matches = c.matches;
+    k.pose_inliers = c.pose_inliers;
+    k.inlier_ratio = c.inlier_ratio;
+    k.coverage = c.coverage;
+    k.homography_share = c.homography_share;
     const auto& q = c.relative_rotation;
     const auto& t = c.relative_translation;
-    mild::PeerLoop::Candidate k{c.station,
-                                c.robot,
-                                c.session,
-                                c.id,
-                                c.probability,
-                                c.filter_probability,
-                                c.similarity,
-                                c.verified != 0,
-                                c.inliers,
-                                c.matches,
-                                c.pose_inliers,
-                                c.inlier_ratio,
-                                c.coverage,
-                                c.homography_share,
-                                {q.x, q.y, q.z, q.w, t.x, t.y, t.z},
-                                c.reprojection_error,
-                                c.inlier_query_indices.size(),
-                                c.inlier_candidate_indices.size(),
-                                c.inlier_query_pixels.size(),
-                                c.inlier_candidate_pixels.size()};
+    k.pose = {q.x, q.y, q.z, q.w, t.x, t.y, t.z};
+    k.reprojection_error = c.reprojection_error;
+    k.query_indices = c.inlier_query_indices.size();
+    k.candidate_indices = c.inlier_candidate_indices.size();
+    k.query_pixels = c.inlier_query_pixels.size();
+    k.candidate_pixels = c.inlier_candidate_pixels.size();
     for (const float v : c.inlier_query_pixels) k.pixels_finite = k.pixels_finite && std::isfinite(v);
     for (const float v : c.inlier_candidate_pixels) k.pixels_finite = k.pixels_finite && std::isfinite(v);
-    p.candidates.push_back(std::move(k));
   }
   p.frame_id_bytes = l.header.frame_id.size();
   p.timings = {l.extract_ms, l.query_ms, l.filter_ms, l.verify_ms};
-  p.published = mild_lcd::LoopClosure::ConstPtr(boost::make_shared<mild_lcd::LoopClosure>(l));
+  p.published = boost::make_shared<mild_lcd::LoopClosure>(l);  // this PeerLoop's own copy
   p.wire_bytes = ros::serialization::serializationLength(msg);
   return p;
 }
 
-mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(const mild::PeerLoop& loop) {
-  auto msg = boost::make_shared<mild_lcd::LoopClosure>(*std::any_cast<mild_lcd::LoopClosure::ConstPtr>(loop.published));
+mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(mild::PeerLoop& loop) {
+  auto msg = std::any_cast<mild_lcd::LoopClosure::Ptr>(loop.published);
   for (size_t i = 0; i < msg->candidates.size() && i < loop.candidates.size(); ++i) {
     msg->candidates[i].accepted = loop.candidates[i].accepted;
   }

@@ -213,7 +213,7 @@ void TeamLink::send(mild::Outbox out) {
     publish_(loop.robots, boost::make_shared<mild_lcd::LoopClosure>(decidedLoopToMsg(
                               loop, settings_.team_station, correspondences, station_.settings().robots)));
   }
-  for (const auto& [robot, loop] : out.taken) publish_({robot}, peerLoopToPublish(loop));
+  for (auto& [robot, loop] : out.taken) publish_({robot}, peerLoopToPublish(loop));
   for (const mild::DecidedLoop& loop : out.loops) {
     sendTo(loop.peer, "loops",
            teamLoopToMsg(loop, settings_.team_station, correspondences, station_.settings().robots));

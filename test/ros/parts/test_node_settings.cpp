@@ -1,5 +1,6 @@
 // test_ros_parts: the node's settings (ros/node_settings.hpp): types, names, docs/parameters.md's table, defaults.
 
+#include "mild_lcd/team/station.hpp"
 #include "ros_parts_support.hpp"
 
 namespace mild_lcd {
@@ -27,6 +28,24 @@ TEST(NodeSettings, WrongTypesAndMisspeltNamesAreErrorsNamingThem) {
       std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("load_on_start: true\n"); }).find("database_path"), std::string::npos);
   EXPECT_NE(errorOf([] { settingsFrom("database_dir: maps\n"); }).find("absolute"), std::string::npos);
+}
+
+// The ~team/ parameters are the station protocol's settings, and a node serving one robot (named
+// "" in its maps) names it on the wire by its station.
+TEST(NodeSettings, TheTeamParametersAreTheStationsSettings) {
+  const NodeSettings s = settingsFrom(
+      "team:\n  station: alpha\n  summary_bytes: 4096\n  backfill_batch: 7\n  peer_timeout: 2.5\n"
+      "  max_requests_per_second: 40\n  max_pending_pulls: 9\nmax_keyframe_features: 3000\n");
+  const mild::StationSettings one = s.stationSettings({""});
+  EXPECT_EQ(one.station, "alpha");
+  EXPECT_EQ(one.robots, std::vector<std::string>{"alpha"});
+  EXPECT_EQ(one.summary_bytes, 4096u);
+  EXPECT_EQ(one.backfill_batch, 7u);
+  EXPECT_DOUBLE_EQ(one.peer_timeout, 2.5);
+  EXPECT_DOUBLE_EQ(one.max_requests_per_second, 40.0);
+  EXPECT_EQ(one.max_pending_pulls, 9u);
+  EXPECT_EQ(one.max_keyframe_features, 3000u);
+  EXPECT_EQ(s.stationSettings({"robot1", "robot2"}).robots, (std::vector<std::string>{"robot1", "robot2"}));
 }
 
 // BRISK and AKAZE on images as large as ~max_image_pixels allows can hold the worker for minutes:

@@ -37,10 +37,11 @@ mild_lcd::LoopClosure decidedLoopToMsg(const mild::DecidedLoop& loop, const std:
                                        const std::vector<std::string>& robot_names);
 mild_lcd::TeamLoop teamLoopToMsg(const mild::DecidedLoop& loop, const std::string& station, bool correspondences,
                                  const std::vector<std::string>& robot_names);
-// A peer's loop as the station protocol checks it (mild::peerLoopContentProblem), carrying the
-// message as it came; and that message as published once taken, with `accepted` as decided here.
+// A peer's loop as the station protocol checks it (mild::peerLoopContentProblem), carrying a copy
+// of the message as it came; and that copy as published once taken, its `accepted` set as decided
+// here.
 mild::PeerLoop peerLoopFromMsg(const mild_lcd::TeamLoop& msg);
-mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(const mild::PeerLoop& loop);
+mild_lcd::LoopClosure::ConstPtr peerLoopToPublish(mild::PeerLoop& loop);
 
 // Who a message says sent it: what its MAC binds, and what its failures are counted against.
 inline const std::string& senderOf(const mild_lcd::PlaceSummary& m) { return m.station; }
