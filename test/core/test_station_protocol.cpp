@@ -1022,6 +1022,39 @@ TEST_F(HostileFixture, RequestsBeyondTheRateAreAnsweredBusy) {
   EXPECT_EQ(statuses[TeamFeatures::kBusy], 5);
 }
 
+// A stop waits for the pulls still open (Station::settle: their loops would be lost), and no longer
+// than it is told: bravo announces the places alpha stored, alpha pulls their features.
+TEST_F(HostileFixture, SettleWaitsForOpenPullsAndNoLonger) {
+  TeamStatus more = statusOf("bravo");
+  more.summaries = 6;
+  station().receive(more, 300);
+  std::vector<TeamRequest> pulls;
+  for (uint64_t seq = 3; seq < 6; ++seq) {
+    PlaceSummary same_place = summaryOf("bravo", seq, static_cast<int>(seq) - 2);  // alpha's keyframes 1-3
+    same_place.id = 300 + seq;
+    station().receive(same_place, false);
+    for (const auto& [peer, request] : work().requests) {
+      if (request.kind == TeamRequest::kFeatures) pulls.push_back(request);
+    }
+  }
+  ASSERT_FALSE(pulls.empty()) << "the setup: alpha pulls the features of a place it stored";
+  ASSERT_EQ(station().pendingPulls(), pulls.size());
+  station().drain();
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_FALSE(station().settle(std::chrono::milliseconds(60)));
+  EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(60));
+  for (const TeamRequest& pull : pulls) {  // bravo answers: it no longer has them
+    TeamFeatures reply;
+    reply.from = "bravo";
+    reply.request_id = pull.request_id;
+    reply.status = TeamFeatures::kUnknown;
+    station().receive(reply);
+  }
+  work();
+  EXPECT_EQ(station().pendingPulls(), 0u);
+  EXPECT_TRUE(station().settle(std::chrono::milliseconds(0)));
+}
+
 TEST(StationProtocolStart, RefusesAnInvalidNameAndAnotherStationsLedger) {
   TestMaps maps({"robot1"});
   StationSettings settings;
