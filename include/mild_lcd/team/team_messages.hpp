@@ -90,7 +90,7 @@ struct PeerLoop {
     size_t query_indices = 0, candidate_indices = 0;  // its correspondences
     size_t query_pixels = 0, candidate_pixels = 0;    // their pixels' values (two each, or none)
     bool pixels_finite = true;
-    bool accepted = false;  // decided here when taken: verified and probability >= the decision
+    bool accepted = false;  // decided here on arrival (Station::receive), whatever the peer sent
   };
   std::vector<Candidate> candidates;
   size_t frame_id_bytes = 0;

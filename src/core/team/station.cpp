@@ -326,8 +326,9 @@ void Station::receive(TeamFeatures reply) {
   wake_.notify_one();
 }
 
-// Checked on arrival, off the detector lock: a loop refused by its content waits in the inbox as its
-// numbering only, not as the whole message it came as.
+// Checked and its candidates' `accepted` decided on arrival, off the detector lock, by the same
+// rules: a loop refused by its content waits in the inbox as its numbering only, not as the whole
+// message it came as.
 void Station::receive(PeerLoop loop) {
   std::lock_guard<std::mutex> guard(mutex_);
   loop.content_problem = peerLoopContentProblem(loop, rules_);
@@ -335,6 +336,7 @@ void Station::receive(PeerLoop loop) {
     loop.candidates.clear();
     loop.published.reset();
   }
+  for (PeerLoop::Candidate& c : loop.candidates) c.accepted = acceptedHere(c, rules_);
   const uint64_t bytes = loop.wire_bytes;
   if (!enqueue(loops_, std::move(loop), bytes, inbox_bytes_)) ++refused_;
   wake_.notify_one();
@@ -599,7 +601,6 @@ void Station::onLoop(PeerLoop loop, Outbox& out) {
   const size_t robot = robotIndex(loop.query.robot);
   uint64_t loops_from = 0;
   bool caught_up = false;  // every summary the decider numbered is taken here
-  PeerLoopRules rules;
   {
     std::lock_guard<std::mutex> guard(mutex_);
     // Only a peer's loops are taken: a name never heard from makes no peer and no ledger entry.
@@ -611,7 +612,6 @@ void Station::onLoop(PeerLoop loop, Outbox& out) {
     // The lowest it can still send, as its heartbeat says: of this loop's run only.
     loops_from = it->second.runs.current == loop.epoch ? it->second.loops_from : 0;
     caught_up = it->second.summaries <= it->second.taken;
-    rules = rules_;
   }
   const auto lock = maps_.lock();
   std::string problem = loop.content_problem;
@@ -660,7 +660,6 @@ void Station::onLoop(PeerLoop loop, Outbox& out) {
     return;
   }
   out.persist = true;
-  for (PeerLoop::Candidate& c : loop.candidates) c.accepted = acceptedHere(c, rules);
   out.taken.emplace_back(robot, std::move(loop));
 }
 
